@@ -1,0 +1,70 @@
+"""Plot helpers. Each takes an ``ax`` and returns it; none calls ``plt.show()`` or changes global style."""
+import numpy as np
+
+
+def set_axes_equal(ax):
+    """Give a 3D axis the same scale on x, y and z."""
+    lims = np.array([ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d()])
+    centre, half = lims.mean(1), (lims[:, 1] - lims[:, 0]).max() / 2
+    ax.set_xlim3d(centre[0] - half, centre[0] + half)
+    ax.set_ylim3d(centre[1] - half, centre[1] + half)
+    ax.set_zlim3d(centre[2] - half, centre[2] + half)
+    return ax
+
+
+def plot_cameras(ax, R, t, scale=0.1, color="C0", label=None, numbers=False):
+    """Draw cameras as small pyramids on a 3D axis (``x_cam = R @ X + t``; the apex is the centre)."""
+    R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+    corners = scale * np.array([[-1, -0.75, 1.5], [1, -0.75, 1.5], [1, 0.75, 1.5], [-1, 0.75, 1.5]])
+    for i, (Ri, ti) in enumerate(zip(R, t)):
+        C = -Ri.T @ ti
+        W = corners @ Ri + C                       # camera frame -> world: R.T @ (c - t)
+        for w in W:
+            ax.plot(*np.stack([C, w]).T, color=color, lw=0.8)
+        ax.plot(*np.vstack([W, W[:1]]).T, color=color, lw=0.8, label=label if i == 0 else None)
+        if numbers:
+            ax.text(*C, str(i), color=color, fontsize=7)
+    return ax
+
+
+def plot_points(ax, X, color="k", size=1, label=None, **kwargs):
+    """Scatter world points ``(N, 3)`` on a 3D axis."""
+    X = np.asarray(X, float)
+    ax.scatter(X[:, 0], X[:, 1], X[:, 2], s=size, c=color, label=label, depthshade=False, **kwargs)
+    return ax
+
+
+def plot_image_points(ax, x, image=None, image_size=None, color="C1", size=4, label=None, **kwargs):
+    """Pixels ``(N, 2)`` over an image (or an empty frame of ``image_size``), y pointing down."""
+    x = np.asarray(x, float)
+    if image is not None:
+        ax.imshow(image)
+    elif image_size is not None:
+        ax.set_xlim(0, image_size[0])
+        ax.set_ylim(image_size[1], 0)
+        ax.set_aspect("equal")
+    ax.scatter(x[:, 0], x[:, 1], s=size, c=color, label=label, **kwargs)
+    return ax
+
+
+def plot_epipolar_lines(ax, F, x, image_size, which=2, color="C2", lw=0.7):
+    """Draw the epipolar lines of points ``x`` in the other image (``x2ᵀ F x1 = 0``).
+
+    Parameters
+    ----------
+    which : {1, 2}
+        The image the lines are drawn in: 2 for ``l2 = F x1`` (x are points of image 1),
+        1 for ``l1 = Fᵀ x2`` (x are points of image 2).
+    """
+    x_h = np.hstack([np.asarray(x, float), np.ones((len(x), 1))])
+    lines = x_h @ (np.asarray(F).T if which == 2 else np.asarray(F))
+    w, h = image_size
+    xs = np.array([0.0, w])
+    for a, b, c in lines:
+        if abs(b) > 1e-12:
+            ax.plot(xs, -(a * xs + c) / b, color=color, lw=lw)
+        else:
+            ax.plot([-c / a] * 2, [0, h], color=color, lw=lw)
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    return ax

@@ -1,0 +1,18 @@
+import numpy as np
+import pytest
+
+import labutils
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def dino():
+    """The real dinosaur, or a skip that says why (a fresh clone has no real data)."""
+    try:
+        return labutils.load_dino()
+    except labutils.DataNotFoundError as exc:
+        pytest.skip(f"real data missing: {str(exc).splitlines()[0]}")
