@@ -1,0 +1,71 @@
+"""One generic adaptive RANSAC loop, reused by the fundamental matrix and by PnP (H&Z Sec. 4.7.1, Alg. 4.5)."""
+import numpy as np
+
+
+def ransac_iterations(inlier_ratio, sample_size, confidence):
+    """Trials needed to draw one all-inlier sample with probability ``confidence`` (H&Z eq. 4.18).
+
+    >>> ransac_iterations(0.5, 8, 0.99)
+    1177
+    """
+    w = float(np.clip(inlier_ratio, 0.0, 1.0)) ** sample_size
+    if w <= 0.0:
+        return np.iinfo(np.int64).max
+    if w >= 1.0:
+        return 1
+    return int(np.ceil(np.log(1 - confidence) / np.log1p(-w)))
+
+
+def ransac(n_data, sample_size, fit, errors, threshold, rng, confidence=0.999, max_iter=10000, min_iter=1):
+    """Adaptive RANSAC: sample, fit, score by inlier count, stop when ``confidence`` is reached.
+
+    Parameters
+    ----------
+    n_data : int
+        Number of data items (correspondences).
+    sample_size : int
+        Items per minimal sample.
+    fit : callable
+        ``fit(idx)`` gets the sampled indices and returns a list of candidate models (empty when
+        the sample is degenerate; a minimal solver may return several).
+    errors : callable
+        ``errors(model)`` returns an ``(n_data,)`` array of errors (NaN or inf counts as an outlier).
+    threshold : float
+        An item is an inlier when its error is below ``threshold``.
+    rng : numpy.random.Generator
+    confidence : float
+        Probability that at least one sample was all inliers when the loop stops.
+    max_iter, min_iter : int
+
+    Returns
+    -------
+    model : object
+        The candidate with the most inliers (ties broken by the smaller sum of inlier errors).
+    inliers : (n_data,) bool ndarray
+    n_iter : int
+        Samples drawn.
+
+    Raises
+    ------
+    ValueError
+        Fewer data than ``sample_size``, no ``rng``, or no sample gave a model.
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    if n_data < sample_size:
+        raise ValueError(f"RANSAC needs at least {sample_size} data items; got {n_data}")
+    best, best_inliers, best_key = None, np.zeros(n_data, bool), (-1, -np.inf)
+    needed, it = max_iter, 0
+    while it < min(needed, max_iter) or it < min_iter:
+        it += 1
+        idx = rng.choice(n_data, sample_size, replace=False)
+        for model in fit(idx):
+            e = np.asarray(errors(model), float)
+            inl = np.isfinite(e) & (e < threshold)
+            key = (int(inl.sum()), -float(e[inl].sum()))
+            if key > best_key:
+                best, best_inliers, best_key = model, inl, key
+                needed = ransac_iterations(key[0] / n_data, sample_size, confidence)
+    if best is None:
+        raise ValueError(f"RANSAC found no model in {it} samples: every sample was degenerate")
+    return best, best_inliers, it
