@@ -266,7 +266,9 @@ def load_scene(rng, verbose=True, **synthetic_kwargs):
     except DataNotFoundError as exc:
         from .synthetic import make_scene
 
-        kwargs = dict(layout="turntable", n_views=36, n_points=700, noise_px=1.0)
+        # like the dinosaur: 36 views, ~1 px on the measured tracks; the 'real' tracks more precise, 2 % outliers
+        kwargs = dict(layout="turntable", n_views=36, n_points=700, noise_px=1.0, track_noise_px=0.2,
+                      track_outlier_ratio=0.02)
         kwargs.update(synthetic_kwargs)
         scene = make_scene(rng=rng, **kwargs)
         if verbose:

@@ -42,7 +42,8 @@ def _blob(n, size, rng):
 
 
 def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_ratio=0.0, rng=None,
-               K=None, image_size=(720, 576), radius=1.0, object_size=None, planar=False, min_views=2):
+               K=None, image_size=(720, 576), radius=1.0, object_size=None, planar=False, min_views=2,
+               track_noise_px=None, track_outlier_ratio=0.0):
     """A scene with ground truth: cameras, points, noise-free and noisy projections.
 
     Parameters
@@ -65,11 +66,15 @@ def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_
         Put all points on one plane (a degenerate scene for the 8-point algorithm and for calibration).
     min_views : int
         Turntable only: drop points seen by fewer views.
+    track_noise_px, track_outlier_ratio : float, optional
+        When ``track_noise_px`` is given, ``tracks`` is a second, independent measurement of the same
+        points with this noise and outlier ratio (a stand-in for the dinosaur's real tracks, which are
+        more precise than ``x_meas`` but have outliers); otherwise ``tracks`` is ``x_meas``.
 
     Returns
     -------
     Scene
-        ``source='synthetic'``; ``tracks`` is ``x_meas`` (the synthetic scene has one set of tracks).
+        ``source='synthetic'``.
 
     >>> s = make_scene(50, 3, rng=np.random.default_rng(0))
     >>> s.R.shape, s.X.shape, s.x_meas.shape
@@ -123,12 +128,21 @@ def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_
         keep = seen.sum(0) >= min_views
         X, x_true, seen = X[keep], x_true[:, keep], seen[:, keep]
     x_true[~seen] = np.nan
-    x_meas = x_true + rng.normal(scale=noise_px, size=x_true.shape) if noise_px > 0 else x_true.copy()
+    x_meas, outliers = _measure(x_true, seen, noise_px, outlier_ratio, (w, h), rng)
+    tracks = x_meas
+    if track_noise_px is not None:
+        tracks, _ = _measure(x_true, seen, track_noise_px, track_outlier_ratio, (w, h), rng)
+    return Scene(name=f"synthetic-{layout}", K=K, R=R, t=t, X=X, x_true=x_true, x_meas=x_meas,
+                 image_size=(w, h), source="synthetic", noise_px=noise_px, outliers=outliers, tracks=tracks)
+
+
+def _measure(x_true, seen, noise_px, outlier_ratio, image_size, rng):
+    """Noisy copy of ``x_true`` with a fraction of the seen entries replaced by uniform outliers."""
+    x = x_true + rng.normal(scale=noise_px, size=x_true.shape) if noise_px > 0 else x_true.copy()
     outliers = np.zeros(seen.shape, bool)
     if outlier_ratio > 0:
         vi, pi = np.nonzero(seen)
         pick = rng.random(vi.size) < outlier_ratio
         outliers[vi[pick], pi[pick]] = True
-        x_meas[vi[pick], pi[pick]] = rng.uniform([0, 0], [w, h], size=(pick.sum(), 2))
-    return Scene(name=f"synthetic-{layout}", K=K, R=R, t=t, X=X, x_true=x_true, x_meas=x_meas,
-                 image_size=(w, h), source="synthetic", noise_px=noise_px, outliers=outliers, tracks=x_meas)
+        x[vi[pick], pi[pick]] = rng.uniform([0, 0], image_size, size=(pick.sum(), 2))
+    return x, outliers
