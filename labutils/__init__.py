@@ -19,6 +19,7 @@ from .data import DataNotFoundError, Scene, data_dirs, find_data, has_data, load
 from .geometry import (KRt_from_P, P_from_KRt, angle_axis_from_rotation, camera_center, dehomogeneous, homogeneous,
                        project, relative_pose, rotation_from_angle_axis, skew)
 from .metrics import align_cameras, align_similarity, angle_between_deg, ml_residual_bound, pose_errors, rotation_error_deg
+from .pnp import bearings, p3p, p3p_bearings, pnp_ransac, refine_pose, reprojection_errors
 from .synthetic import make_scene
 
 __all__ = [
@@ -26,5 +27,6 @@ __all__ = [
     "KRt_from_P", "P_from_KRt", "angle_axis_from_rotation", "camera_center", "dehomogeneous", "homogeneous",
     "project", "relative_pose", "rotation_from_angle_axis", "skew",
     "align_cameras", "align_similarity", "angle_between_deg", "ml_residual_bound", "pose_errors", "rotation_error_deg",
+    "bearings", "p3p", "p3p_bearings", "pnp_ransac", "refine_pose", "reprojection_errors",
     "make_scene",
 ]
