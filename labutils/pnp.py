@@ -162,7 +162,7 @@ def p3p_bearings(X, y):
     d12, d13, d23 = X[0] - X[1], X[0] - X[2], X[1] - X[2]
     a12, a13, a23 = d12 @ d12, d13 @ d13, d23 @ d23
     c = _cross(d12, d13)
-    if c @ c <= 1e-18 * a12 * a13 or min(a12, a13, a23) == 0:
+    if min(a12, a13, a23) == 0 or c @ c <= 1e-12 * a12 * a13:      # sin² of the angle at X₁ below 1e-12
         raise ValueError("the 3 world points are collinear (or coincide): the pose is not determined")
     return _p3p_core(X, y, (a12, a13, a23), d12, d13, c)
 
@@ -478,14 +478,10 @@ def pnp_ransac(X, x, K, threshold=2.0, confidence=0.9999, rng=None, max_iter=100
     y = bearings(x, K)
 
     def fit(idx):
-        Xs = X[idx]
-        d12, d13 = Xs[0] - Xs[1], Xs[0] - Xs[2]
-        d23 = Xs[1] - Xs[2]
-        a = (d12 @ d12, d13 @ d13, d23 @ d23)
-        c = _cross(d12, d13)
-        if min(a) == 0 or c @ c <= 1e-12 * a[0] * a[1]:   # collinear sample: no candidate
+        try:
+            return p3p_bearings(X[idx], y[idx])
+        except ValueError:                      # a collinear sample: no candidate
             return []
-        return _p3p_core(Xs, y[idx], a, d12, d13, c)
 
     def errors(model):
         return reprojection_errors(X, x, K, *model)

@@ -227,3 +227,23 @@ def test_pnp_ransac_on_dino(dino, rng):
         delta = np.r_[angle_axis_from_rotation(R1 @ dino.R[i].T), t1 - dino.t[i]]
         J = pose_jacobian(np.r_[np.zeros(3), dino.t[i]], X[~out], x[~out], dino.K, dino.R[i])
         assert delta @ (J.T @ J) @ delta / 0.5 ** 2 < 27.9        # χ²(6) 99.999 % quantile
+
+
+def test_pnp_ransac_skips_collinear_samples_and_points_behind(rng):
+    R = rotation_from_angle_axis([0.2, -0.1, 0.3])
+    t = np.array([0.0, 0.0, 5.0])
+    line = np.outer(np.linspace(-1, 1, 25), [1.0, 0.5, 0.2])          # most points on one line:
+    X_cam = np.vstack([line, rng.uniform(-1, 1, (6, 3))]) + t          # most samples are collinear
+    X = (X_cam - t) @ R
+    x = X_cam @ K_SKEW.T
+    x = x[:, :2] / x[:, 2:]
+    R1, t1, inl, info = pnp_ransac(X, x, K_SKEW, rng=rng, return_info=True)
+    assert pose_distance(R1, t1, R, t) < 1e-9 and inl.all()
+    # points mirrored through the camera centre have the same pixels but lie behind it: outliers
+    behind = np.zeros(len(X), bool)
+    behind[[3, 10, 27]] = True
+    X_b = X.copy()
+    X_b[behind] = (-(X_cam[behind] - t) - 2 * t) @ R                  # camera frame: -X_cam
+    R2, t2, inl2 = pnp_ransac(X_b, x, K_SKEW, rng=rng)
+    assert pose_distance(R2, t2, R, t) < 1e-9 and np.array_equal(inl2, ~behind)
+    assert np.all(np.isinf(reprojection_errors(X_b[behind], x[behind], K_SKEW, R, t)))
