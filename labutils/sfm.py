@@ -548,7 +548,8 @@ def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_an
         ``i, j`` (views), ``R, t`` (view j relative to view i), ``track`` (indices of the accepted tracks),
         ``X`` (their points in view i's frame), ``median_angle``.
     table : list of dict
-        One row per candidate: ``i, j, shared, points, median_angle``.
+        One row per candidate, most shared tracks first: ``i, j, shared, points, median_angle`` (and
+        ``failed``, the reason, when the two-view reconstruction failed).
 
     Raises
     ------
@@ -571,18 +572,22 @@ def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_an
         try:
             R, t, X, med = two_view_reconstruction(x1, x2, Ks[a], Ks[b], rng, threshold_px=threshold_px,
                                                    confidence=confidence)
-        except ValueError:
+        except ValueError as exc:          # e.g. no baseline: no pose puts the points in front
+            table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=0, median_angle=0.0, failed=str(exc)))
+            results.append(None)
             continue
         ok = np.isfinite(X[:, 0])
         table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=int(ok.sum()), median_angle=med))
         results.append(dict(i=int(a), j=int(b), R=R, t=t, track=idx[ok], X=X[ok], median_angle=med))
-    if not results:
-        raise ValueError("no candidate pair gave a two-view reconstruction")
-    wide = [k for k, r in enumerate(table) if r["median_angle"] >= min_angle_deg]
+    usable = [k for k, r in enumerate(results) if r is not None and table[k]["points"] >= 8]
+    if not usable:
+        raise ValueError("no candidate pair gave a two-view reconstruction: "
+                         + "; ".join(f"({r['i']}, {r['j']}): {r.get('failed', 'too few points')}" for r in table))
+    wide = [k for k in usable if table[k]["median_angle"] >= min_angle_deg]
     if wide:
         best = max(wide, key=lambda k: (table[k]["points"], -k))
     else:
-        best = max(range(len(table)), key=lambda k: (table[k]["median_angle"], -k))
+        best = max(usable, key=lambda k: (table[k]["median_angle"], -k))
     return results[best], table
 
 
