@@ -157,12 +157,12 @@ def ply_text(X):
     property double y
     property double z
     end_header
-    1 2 3.5
+    1.0 2.0 3.5
     """
     X = np.asarray(X, float).reshape(-1, 3)
     head = ["ply", "format ascii 1.0", "comment written by labutils.sfm", f"element vertex {len(X)}",
             "property double x", "property double y", "property double z", "end_header"]
-    return "\n".join(head + [" ".join(f"{c:.17g}" for c in p) for p in X]) + "\n"
+    return "\n".join(head + [" ".join(repr(float(c)) for c in p) for p in X]) + "\n"
 
 
 def read_result_json(path):
@@ -1140,8 +1140,7 @@ def read_calibration(path, n_views):
 def write_tracks(path, tracks):
     """Write ``tracks`` (V, T, 2), NaN where unseen, as a VGG track file (inverse of :func:`read_tracks`)."""
     a = np.asarray(tracks, float).transpose(1, 0, 2).reshape(np.shape(tracks)[1], -1)
-    a = np.where(np.isnan(a), -1.0, a)
-    Path(path).write_text("".join(" ".join(f"{v:.17g}" for v in row) + "\n" for row in a))
+    Path(path).write_text("".join(" ".join("-1" if np.isnan(v) else repr(float(v)) for v in row) + "\n" for row in a))
 
 
 def _write_atomically(path, text):
