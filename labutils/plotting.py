@@ -68,3 +68,26 @@ def plot_epipolar_lines(ax, F, x, image_size, which=2, color="C2", lw=0.7):
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     return ax
+
+
+def plot_matches(ax, x1, x2, inliers=None, image=None, image_size=None, size=6):
+    """Correspondences drawn in image 1 as short segments ``x1 -> x2`` (the image motion).
+
+    Inliers (all, when ``inliers`` is None) in green, outliers in red; over ``image`` or an empty frame
+    of ``image_size`` (y pointing down).
+    """
+    x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
+    names = ("inliers", "outliers") if inliers is not None else ("matches", "")
+    inliers = np.ones(len(x1), bool) if inliers is None else np.asarray(inliers, bool)
+    if image is not None:
+        ax.imshow(image)
+    elif image_size is not None:
+        ax.set_xlim(0, image_size[0])
+        ax.set_ylim(image_size[1], 0)
+        ax.set_aspect("equal")
+    for mask, color, label in ((inliers, "limegreen", names[0]), (~inliers, "red", names[1])):
+        if mask.any():
+            seg = np.stack([x1[mask], x2[mask]], axis=1)
+            ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color=color, lw=0.8)
+            ax.scatter(x1[mask, 0], x1[mask, 1], s=size, c=color, label=f"{label} ({mask.sum()})")
+    return ax
