@@ -534,7 +534,7 @@ def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence
     if refine and ok.sum() >= 8:
         ci, pi = np.nonzero(used[:, ok])
         res = bundle_adjust(Rs, ts, X[ok], ci, pi, xs[ci, np.flatnonzero(ok)[pi]], Ks, loss=loss, f_scale=f_scale,
-                            fixed_cameras=[0])
+                            fixed_cameras=[0], max_iter=30, tol=1e-6)     # a repair, not the last word
         s = np.linalg.norm(res.t[1])                              # keep ‖t‖ = 1 exactly
         Rs, ts = np.stack([np.eye(3), res.R[1]]), np.stack([np.zeros(3), res.t[1] / s])
         X, used = triangulate_tracks(xs, Ks, Rs, ts, [0, 1], np.ones_like(mask), max_error_px=threshold_px,
