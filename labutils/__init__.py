@@ -16,11 +16,16 @@ Conventions, used everywhere in this package and the notebooks
 References: Hartley & Zisserman, *Multiple View Geometry*, 2nd ed. (cited as H&Z).
 """
 from .data import DataNotFoundError, Scene, data_dirs, find_data, has_data, load_dino, load_scene, observations
+from .epipolar import (decompose_essential, essential_from_fundamental, fundamental_7point, fundamental_8point,
+                       fundamental_from_pose, fundamental_gold_standard, fundamental_ransac, pose_from_essential,
+                       sampson_distance)
 from .geometry import (KRt_from_P, P_from_KRt, angle_axis_from_rotation, camera_center, dehomogeneous, homogeneous,
                        project, relative_pose, rotation_from_angle_axis, skew)
 from .metrics import align_cameras, align_similarity, angle_between_deg, ml_residual_bound, pose_errors, rotation_error_deg
 from .pnp import bearings, p3p, p3p_bearings, pnp_ransac, refine_pose, reprojection_errors
+from .sfm import Reconstruction, bundle_from_cameras, camera_errors, incremental_sfm
 from .synthetic import make_scene
+from .triangulation import fundamental_residual, triangulate, triangulate_multiview, triangulate_optimal
 
 __all__ = [
     "DataNotFoundError", "Scene", "data_dirs", "find_data", "has_data", "load_dino", "load_scene", "observations",
@@ -29,4 +34,8 @@ __all__ = [
     "align_cameras", "align_similarity", "angle_between_deg", "ml_residual_bound", "pose_errors", "rotation_error_deg",
     "bearings", "p3p", "p3p_bearings", "pnp_ransac", "refine_pose", "reprojection_errors",
     "make_scene",
+    "decompose_essential", "essential_from_fundamental", "fundamental_7point", "fundamental_8point",
+    "fundamental_from_pose", "fundamental_gold_standard", "fundamental_ransac", "pose_from_essential",
+    "sampson_distance", "fundamental_residual", "triangulate", "triangulate_multiview", "triangulate_optimal",
+    "Reconstruction", "bundle_from_cameras", "camera_errors", "incremental_sfm",
 ]
