@@ -68,3 +68,24 @@ def plot_epipolar_lines(ax, F, x, image_size, which=2, color="C2", lw=0.7):
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     return ax
+
+
+def plot_sparsity(ax, A, n_camera_cols=None, markersize=0.3, title=None, color="k"):
+    """Spy plot of a sparse matrix (a bundle-adjustment Jacobian or ``JᵀJ``), rows down, columns across.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix or ndarray
+    n_camera_cols : int, optional
+        Number of camera columns (``k · V``): a red line separates them from the point columns (and,
+        for a square matrix, the camera rows from the point rows).
+    """
+    ax.spy(A, markersize=markersize, aspect="auto", color=color)
+    if n_camera_cols:
+        ax.axvline(n_camera_cols - 0.5, color="C3", lw=0.8)
+        if A.shape[0] == A.shape[1]:
+            ax.axhline(n_camera_cols - 0.5, color="C3", lw=0.8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    ax.tick_params(labelsize=7)
+    return ax
