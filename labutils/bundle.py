@@ -753,10 +753,8 @@ def _lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter
         S += _block_diag_dense(Ua)
         rhs = -(gc - st.A_cam @ np.einsum("nij,nj->ni", Y, gp[pi])).ravel()
         try:
-            # numpy's LAPACK (not scipy's second OpenBLAS copy: two thread pools spinning against each
-            # other on a small machine cost 100x on a 200x200 factorisation)
-            L = np.linalg.cholesky(S)
-            dc = np.linalg.solve(L.T, np.linalg.solve(L, rhs)).reshape(V, k)
+            dc = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S, lower=True, check_finite=False), rhs,
+                                        check_finite=False).reshape(V, k)
         except np.linalg.LinAlgError:
             mu *= nu
             nu *= 2
