@@ -42,11 +42,16 @@ Solvers
 - ``'lm-schur'``: our Levenberg–Marquardt (Madsen, Nielsen & Tingleff 2004, Alg. 3.16, with
   Marquardt's diagonal scaling and Nielsen's damping update) on the normal equations, eliminating
   the 3×3 point blocks by the Schur complement (Triggs et al. Sec. 6.1; H&Z Sec. A6.3) and solving
-  the reduced camera system by dense Cholesky. Robust losses by iteratively reweighted least squares.
+  the reduced camera system by dense Cholesky. Robust losses by iteratively reweighted least squares,
+  then the loss's second-order curvature near the optimum (see ``loss`` in :func:`bundle_adjust`).
 - ``'scipy'``: :func:`scipy.optimize.least_squares` (trust-region reflective, ``x_scale='jac'``)
   with our analytic sparse Jacobian (``scipy_jac='analytic'``, default), or finite differences
   grouped by the sparsity mask (``'sparsity'``), or dense finite differences (``'dense'``; small
-  problems only).
+  problems only). Measured on the dinosaur (36 cameras, 4,983 points, soft_l1 loss, 2 cores):
+  LM-Schur 13 iterations in 0.27 s; scipy with the mask 17 iterations in 3.2 s (7e-5 above), or
+  with tighter LSMR tolerances 15 iterations in 14.6 s (the same cost).
+
+Both solvers run with OpenBLAS on one thread (:func:`single_threaded_blas`).
 
 Command line: ``python -m labutils.bundle PROBLEM.txt --solver {lm-schur,scipy} --out SOLVED.txt
 [--fix-intrinsics] [--json]`` solves a BAL file (see :mod:`labutils.bal`).
