@@ -15,6 +15,7 @@ Conventions, used everywhere in this package and the notebooks
 
 References: Hartley & Zisserman, *Multiple View Geometry*, 2nd ed. (cited as H&Z).
 """
+from .bundle import BundleResult, bundle_adjust, jacobian_sparsity, reprojection_jacobian, reprojection_residuals
 from .data import DataNotFoundError, Scene, data_dirs, find_data, has_data, load_dino, load_scene, observations
 from .epipolar import (decompose_essential, essential_from_fundamental, fundamental_7point, fundamental_8point,
                        fundamental_from_pose, fundamental_gold_standard, fundamental_ransac, pose_from_essential,
@@ -38,4 +39,5 @@ __all__ = [
     "fundamental_from_pose", "fundamental_gold_standard", "fundamental_ransac", "pose_from_essential",
     "sampson_distance", "fundamental_residual", "triangulate", "triangulate_multiview", "triangulate_optimal",
     "Reconstruction", "bundle_from_cameras", "camera_errors", "incremental_sfm",
+    "BundleResult", "bundle_adjust", "jacobian_sparsity", "reprojection_jacobian", "reprojection_residuals",
 ]
