@@ -257,6 +257,20 @@ def _gauge_inverse(H, N):
 
 
 # -------------------------------------------------------------------------------- the prediction
+def effective_terms(cov):
+    """How many independent χ²₁ terms one Monte Carlo trial of ``|e|²`` is worth, ``e ~ N(0, cov)``.
+
+    ``|e|²`` has mean ``tr Σ`` and variance ``2 tr Σ²``, like a sum of ``n_eff = (tr Σ)² / tr Σ²``
+    independent χ²₁ terms (1 ≤ n_eff ≤ the dimension; correlated errors make it small). The RMS of
+    ``|e|`` over T trials then has a relative standard deviation of ``1 / sqrt(2 T n_eff)``.
+
+    >>> effective_terms(np.eye(6)), effective_terms(np.diag([1.0, 0, 0]))
+    (6.0, 1.0)
+    """
+    cov = np.asarray(cov, float)
+    return float(np.trace(cov) ** 2 / np.sum(cov * cov))
+
+
 @dataclass
 class PosePrediction:
     """Predicted covariance of the aligned pose errors, and the RMS errors it implies.
@@ -302,14 +316,9 @@ class PosePrediction:
         return float(np.sqrt(np.mean(self.centre_rms_rel ** 2)))
 
     def n_effective(self, which="rot"):
-        """Effective number of independent squared terms in one trial's sum of squared errors.
-
-        A trial's ``Σ_i |φ_i|²`` is a Gaussian quadratic form with mean ``tr Σ`` and variance
-        ``2 tr Σ²``; it carries as much information as ``n_eff = (tr Σ)² / tr Σ²`` independent
-        χ²₁ terms (between 1 and 3 V: the errors of neighbouring cameras are correlated).
-        """
-        S = self._blocks(which)
-        return float(np.trace(S) ** 2 / np.sum(S * S))
+        """Effective number of independent squared terms in one trial's sum of squared errors
+        (:func:`effective_terms` of the rotation or centre blocks of ``cov``)."""
+        return effective_terms(self._blocks(which))
 
     def mc_relative_sd(self, n_trials, which="rot"):
         """Relative standard deviation of a Monte Carlo RMS error over ``n_trials`` trials:
@@ -375,6 +384,106 @@ def aligned_pose_covariance(R, t, X, camera_indices, point_indices, K, sigma=1.0
         raise ValueError(f"method must be 'schur' or 'dense'; got {method!r}")
     cov = sigma ** 2 * 0.5 * (cov + cov.T)
     return cov
+
+
+def s_transformation(N, G):
+    """The S-transformation onto a gauge: ``P = I - N (Gᵀ N)⁻¹ Gᵀ`` (Baarda 1973; Triggs et al. Sec. 9).
+
+    A parameter error ``δ`` known up to the gauge directions ``N`` is moved along them until it
+    satisfies the gauge's linearised constraints ``Gᵀ δ = 0``: ``P N = 0``, ``Gᵀ P = 0``, ``P² = P``.
+    The covariance in that gauge is ``P Σ Pᵀ`` for any generalised inverse ``Σ`` of the information.
+
+    Parameters
+    ----------
+    N : (n, k) ndarray
+        Gauge directions (e.g. :func:`gauge_basis`, k = 7).
+    G : (n, k) ndarray
+        Constraint normals (e.g. :func:`first_camera_gauge`); ``Gᵀ N`` must be invertible.
+
+    Returns
+    -------
+    P : (n, n) ndarray
+
+    >>> N = np.array([[1.0], [1.0]]); G = np.array([[1.0], [0.0]])   # gauge: shift both; fix the first
+    >>> s_transformation(N, G) @ np.array([2.0, 5.0])
+    array([0., 3.])
+    """
+    N, G = np.asarray(N, float), np.asarray(G, float)
+    if N.ndim != 2 or G.shape != N.shape:
+        raise ValueError(f"N and G must both have shape (n, k); got {N.shape} and {G.shape}")
+    GtN = G.T @ N
+    if np.linalg.cond(GtN) > 1e12:
+        raise ValueError("the constraints G do not fix the gauge (Gᵀ N is singular)")
+    return np.eye(N.shape[0]) - N @ np.linalg.solve(GtN, G.T)
+
+
+def first_camera_gauge(R, t, X, anchor=0, scale_camera=1):
+    """Linearised constraints of the gauge :func:`labutils.bundle.bundle_adjust` uses by default.
+
+    The pose of camera ``anchor`` is held (6 constraints: ``δω_a = 0``, ``δt_a = 0``) and the
+    distance between the centres of ``anchor`` and ``scale_camera`` (1 constraint:
+    ``uᵀ (δC_b - δC_a) = 0`` with ``u`` the unit baseline).
+
+    Returns
+    -------
+    G : (6 V + 3 M, 7) ndarray
+        Constraint normals for :func:`s_transformation`.
+    """
+    R, t = _check_Rt(R, t)
+    X = as_points(X, "X", dim=3)
+    V, M = len(R), len(X)
+    if not (0 <= anchor < V and 0 <= scale_camera < V and anchor != scale_camera):
+        raise ValueError(f"anchor and scale_camera must be two different cameras in 0..{V - 1}")
+    C = -np.einsum("vji,vj->vi", R, t)
+    u = C[scale_camera] - C[anchor]
+    if np.linalg.norm(u) < 1e-12 * max(np.abs(C).max(), 1e-300):
+        raise ValueError("the anchor and scale cameras have the same centre: the scale is not fixed")
+    u = u / np.linalg.norm(u)
+    D = camera_perturbation_map(R, t)                      # rows 3: of D map (δω, δt) to δC
+    G = np.zeros((6 * V + 3 * M, 7))
+    G[6 * anchor:6 * anchor + 6, :6] = np.eye(6)
+    G[6 * scale_camera:6 * scale_camera + 6, 6] = u @ D[scale_camera, 3:]
+    G[6 * anchor:6 * anchor + 6, 6] = -u @ D[anchor, 3:]
+    return G
+
+
+def gauge_pose_covariance(R, t, X, camera_indices, point_indices, K, sigma=1.0, *, G=None, jacobian=None):
+    """Predicted covariance of the pose errors ``(a_i, c_i)`` in a fixed gauge, without any alignment.
+
+    This is what the errors of a bundle adjustment run in that gauge (default: the first camera and
+    one baseline held, as :func:`labutils.bundle.bundle_adjust` does) look like when they are
+    compared with the truth directly: zero at the anchor, growing away from it. It is *not* what is
+    measured after a similarity alignment (:func:`aligned_pose_covariance`).
+
+    Parameters
+    ----------
+    G : (6 V + 3 M, 7) ndarray, optional
+        Gauge constraints (default: :func:`first_camera_gauge` with cameras 0 and 1).
+    Other parameters as in :func:`aligned_pose_covariance`.
+
+    Returns
+    -------
+    cov : (6 V, 6 V) ndarray
+        Covariance of ``(a_1, c_1, …, a_V, c_V)`` (``R̂ = exp([a]×) R``, ``c = Ĉ - C``).
+    """
+    R, t = _check_Rt(R, t)
+    X = as_points(X, "X", dim=3)
+    K = as_matrix(K, "K", (3, 3))
+    ci, pi = _check_observations(camera_indices, point_indices, len(R), len(X))
+    V, M = len(R), len(X)
+    J = _jacobian(R, t, X, ci, pi, K) if jacobian is None else sp.csr_matrix(jacobian)
+    N = gauge_basis(R, t, X)
+    G = first_camera_gauge(R, t, X) if G is None else np.asarray(G, float)
+    Sg = _gauge_inverse(camera_information(J, V, M), N[:6 * V])
+    # the S-transformation acts on cameras and points, but the constraints here involve cameras
+    # only, so its camera block maps camera errors to camera errors
+    if np.any(G[6 * V:]):
+        raise ValueError("this function supports gauge constraints on camera parameters only")
+    P = s_transformation(N, G)[:6 * V, :6 * V]
+    D = camera_perturbation_map(R, t)
+    Dblk = sp.block_diag(list(D)).toarray()
+    cov = Dblk @ P @ Sg @ P.T @ Dblk.T
+    return sigma ** 2 * 0.5 * (cov + cov.T)
 
 
 def predict_pose_errors(R, t, X, camera_indices, point_indices, K, sigma=1.0, **kwargs):
