@@ -563,7 +563,8 @@ def noisy_observations(x_true, sigma, rng, outlier_ratio=0.0, image_size=None):
     return x, outliers
 
 
-def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, max_iter=100, R0=None, t0=None, X0=None):
+def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, final_loss="linear", max_iter=100,
+                  R0=None, t0=None, X0=None):
     """Bundle adjustment of ``x_meas`` started from the true cameras and points (the ML estimate).
 
     A stand-in for the full pipeline when only the ML estimate's behaviour matters: with noise of
@@ -578,8 +579,11 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, 
     loss, f_scale : passed to :func:`labutils.bundle.bundle_adjust` (``'huber'``, ``'cauchy'``... are robust).
     reject_px : float, optional
         The outlier-removal step: after a first adjustment drop the observations whose
-        reprojection error exceeds ``reject_px`` pixels and adjust again (with the same loss); a
-        point left with fewer than two observations is dropped (NaN in ``X``).
+        reprojection error exceeds ``reject_px`` pixels and adjust again with ``final_loss`` (default
+        plain least squares: the ML estimate on the kept observations); a point left with fewer than
+        two observations is dropped (NaN in ``X``).
+    R0, t0, X0 : optional
+        Another starting point than the truth.
 
     Returns
     -------
@@ -610,8 +614,8 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, 
         pts = np.flatnonzero(n_left >= 2)
         remap = np.full(len(X0), -1)
         remap[pts] = np.arange(pts.size)
-        res2 = bundle_adjust(res.R, res.t, res.X[pts], ci[kept], remap[pi[kept]], x2d[kept], scene.K, loss=loss,
-                             f_scale=f_scale, max_iter=max_iter)
+        res2 = bundle_adjust(res.R, res.t, res.X[pts], ci[kept], remap[pi[kept]], x2d[kept], scene.K,
+                             loss=final_loss, f_scale=f_scale, max_iter=max_iter)
         X = np.full((len(X0), 3), np.nan)
         X[pts] = res2.X
         res = res2
@@ -667,3 +671,96 @@ class Progress:
             self.bar.value = self.n
         if self.n % self.every == 0 or self.n == self.total:
             print(f"{self.label} {self.n}/{self.total} ({time.perf_counter() - self.tic:.1f} s)", flush=True)
+
+
+@dataclass
+class NoiseStudy:
+    """Pose errors of a pipeline over noise levels and trials (see :func:`run_noise_study`).
+
+    Attributes
+    ----------
+    sigmas : list of float
+    rot_deg, centre_rel : dict float -> (T, V) ndarray
+        Per trial and camera, after similarity alignment of the registered cameras' centres
+        (NaN for a camera the pipeline did not register).
+    estimates : dict float -> list of (R, t)
+        The raw estimates (the pipeline's own gauge), for plotting single trials.
+    seconds : dict float -> (T,) ndarray
+        Wall time of each pipeline call.
+    """
+
+    sigmas: list
+    rot_deg: dict
+    centre_rel: dict
+    estimates: dict
+    seconds: dict
+
+    def rms(self, which="rot"):
+        """RMS error over cameras and trials, one per sigma: ``(S,)`` array."""
+        d = self.rot_deg if which == "rot" else self.centre_rel
+        return np.array([np.sqrt(np.nanmean(d[s] ** 2)) for s in self.sigmas])
+
+    def table(self, pred=None):
+        """A printable table: per sigma the trial count, mean ± sd and RMS of both errors, and, given
+        a :class:`PosePrediction` for σ = 1, the predicted RMS and the ratio empirical / predicted."""
+        head = f"{'sigma':>6} {'trials':>6} | {'rot mean ± sd (deg)':>22} {'RMS':>9}"
+        head += f" {'pred':>9} {'ratio':>6}" if pred else ""
+        head += f" | {'centre mean ± sd (rel)':>24} {'RMS':>9}" + (f" {'pred':>9} {'ratio':>6}" if pred else "")
+        lines = [head]
+        for s, r_rms, c_rms in zip(self.sigmas, self.rms("rot"), self.rms("centre")):
+            r, c = self.rot_deg[s], self.centre_rel[s]
+            row = f"{s:6.2f} {len(r):6d} | {np.nanmean(r):10.3g} ± {np.nanstd(r):9.3g} {r_rms:9.3g}"
+            if pred:
+                row += f" {pred.rot_rms_deg_all * s:9.3g} {r_rms / (pred.rot_rms_deg_all * s) if s > 0 else np.nan:6.3f}"
+            row += f" | {np.nanmean(c):11.3g} ± {np.nanstd(c):10.3g} {c_rms:9.3g}"
+            if pred:
+                row += f" {pred.centre_rms_rel_all * s:9.3g} {c_rms / (pred.centre_rms_rel_all * s) if s > 0 else np.nan:6.3f}"
+            lines.append(row)
+        return "\n".join(lines)
+
+
+def run_noise_study(scene, reconstruct, sigmas, n_trials, rng, label="trials", keep_estimates=True):
+    """Run ``reconstruct`` on noisy copies of ``scene.x_true`` and measure the aligned pose errors.
+
+    Parameters
+    ----------
+    scene : labutils.data.Scene
+        Ground truth: ``R, t`` and the noise-free projections ``x_true`` (NaN where unseen).
+    reconstruct : callable
+        ``reconstruct(scene, x_meas, rng) -> (R, t)`` with NaN poses for unregistered views; the
+        pipeline under study (BA from the truth, or the full incremental SfM).
+    sigmas : sequence of float
+        Pixel noise levels.
+    n_trials : int or dict float -> int
+        Trials per level.
+    rng : numpy.random.Generator
+        Draws the noise and is passed on to ``reconstruct``.
+
+    Returns
+    -------
+    NoiseStudy
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    sigmas = [float(s) for s in sigmas]
+    counts = {s: int(n_trials[s] if isinstance(n_trials, dict) else n_trials) for s in sigmas}
+    if min(counts.values()) < 1:
+        raise ValueError(f"need at least one trial per noise level; got {counts}")
+    progress = Progress(sum(counts.values()), label)
+    V = scene.n_views
+    rot, cen, est, sec = {}, {}, {}, {}
+    for s in sigmas:
+        rot[s], cen[s] = np.full((counts[s], V), np.nan), np.full((counts[s], V), np.nan)
+        est[s], sec[s] = [], np.zeros(counts[s])
+        for k in range(counts[s]):
+            x_meas, _ = noisy_observations(scene.x_true, s, rng)
+            tic = time.perf_counter()
+            R, t = reconstruct(scene, x_meas, rng)
+            sec[s][k] = time.perf_counter() - tic
+            ok = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
+            if ok.sum() >= 3:
+                rot[s][k, ok], cen[s][k, ok] = pose_errors(R[ok], t[ok], scene.R[ok], scene.t[ok])
+            if keep_estimates:
+                est[s].append((np.asarray(R), np.asarray(t)))
+            progress.step()
+    return NoiseStudy(sigmas=sigmas, rot_deg=rot, centre_rel=cen, estimates=est, seconds=sec)
