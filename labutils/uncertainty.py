@@ -727,8 +727,9 @@ def run_noise_study(scene, reconstruct, sigmas, n_trials, rng, label="trials", k
     scene : labutils.data.Scene
         Ground truth: ``R, t`` and the noise-free projections ``x_true`` (NaN where unseen).
     reconstruct : callable
-        ``reconstruct(scene, x_meas, rng) -> (R, t)`` with NaN poses for unregistered views; the
-        pipeline under study (BA from the truth, or the full incremental SfM).
+        ``reconstruct(scene, x_meas, sigma, rng) -> (R, t)``, NaN poses for unregistered views: the
+        pipeline under study (BA from the truth, or the full incremental SfM). It is told the noise
+        level, as a real pipeline is told its thresholds.
     sigmas : sequence of float
         Pixel noise levels.
     n_trials : int or dict float -> int
@@ -755,7 +756,7 @@ def run_noise_study(scene, reconstruct, sigmas, n_trials, rng, label="trials", k
         for k in range(counts[s]):
             x_meas, _ = noisy_observations(scene.x_true, s, rng)
             tic = time.perf_counter()
-            R, t = reconstruct(scene, x_meas, rng)
+            R, t = reconstruct(scene, x_meas, s, rng)
             sec[s][k] = time.perf_counter() - tic
             ok = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
             if ok.sum() >= 3:

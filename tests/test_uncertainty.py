@@ -188,6 +188,24 @@ def test_robust_steps_resist_outliers(small):
     assert robust < 2 * pred.rot_rms_deg_all
 
 
+def test_run_noise_study(small):
+    s, ci, pi = small
+
+    def reconstruct(scene, x_meas, sigma, rng):
+        R, t, _, _ = U.ba_from_truth(scene, x_meas)
+        R[5], t[5] = np.nan, np.nan                       # a view the pipeline failed to register
+        return R, t
+
+    study = U.run_noise_study(s, reconstruct, [0.0, 1.0], {0.0: 1, 1.0: 3}, np.random.default_rng(5))
+    assert study.rot_deg[1.0].shape == (3, len(s.R)) and len(study.estimates[1.0]) == 3
+    assert np.all(np.isnan(study.rot_deg[1.0][:, 5])) and np.all(np.isfinite(np.delete(study.rot_deg[1.0], 5, 1)))
+    assert study.rms("rot")[0] < 1e-6 and study.rms("rot")[1] > 0
+    pred = U.predict_pose_errors(s.R, s.t, s.X, ci, pi, s.K, 1.0)
+    assert "ratio" in study.table(pred) and len(study.table().splitlines()) == 3
+    with pytest.raises(ValueError, match="at least one trial"):
+        U.run_noise_study(s, reconstruct, [1.0], 0, np.random.default_rng(5))
+
+
 def test_dino_prediction(dino):
     ci, pi, _ = observations(dino.x_true)
     p = U.predict_pose_errors(dino.R, dino.t, dino.X, ci, pi, dino.K, 1.0)
