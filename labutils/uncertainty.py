@@ -5,9 +5,9 @@ The theory in five lines
 ------------------------
 With Gaussian pixel noise of standard deviation σ on every coordinate, bundle adjustment is the
 maximum-likelihood (ML) estimate and, to first order, its parameter error is
-``δθ = -(JᵀJ)⁻ Jᵀ ε`` with covariance ``σ² (JᵀJ)⁻`` (H&Z Sec. 5.2.2–5.2.3, Result 5.10 and the
-over-parametrised case; J is the reprojection Jacobian at the truth). A reconstruction is only
-defined up to a similarity, so ``JᵀJ`` has a 7-dimensional null space (3 rotations, 3 translations,
+``δθ = -(JᵀJ)⁻ Jᵀ ε`` with covariance ``σ² (JᵀJ)⁻`` (H&Z Sec. 5.2.2–5.2.3: backward propagation
+of covariance, over-parametrisation; J is the reprojection Jacobian at the truth). A reconstruction
+is only defined up to a similarity, so ``JᵀJ`` has a 7-dimensional null space (3 rotations, 3 translations,
 1 scale: the *gauge*, Triggs et al. 2000, Sec. 9) and "the" covariance depends on how the gauge is
 fixed. What is measured is gauge-free: the errors *after* the estimated camera centres have been
 aligned to the true ones by the least-squares similarity (Umeyama). Linearising that alignment gives
@@ -19,7 +19,8 @@ Error vector per camera ``i``: ``e_i = (φ_i, c_i)``, where ``R_aligned R_true�
 (radians; the rotation error in degrees is ``|φ_i|``) and ``c_i = C_aligned - C_true`` (world units).
 
 References: Hartley & Zisserman (H&Z) Sec. 5.2; B. Triggs, P. McLauchlan, R. Hartley, A. Fitzgibbon,
-"Bundle adjustment — a modern synthesis", 2000, Sec. 9 (gauge freedom); S. Umeyama, PAMI 1991.
+"Bundle adjustment — a modern synthesis", 2000, Sec. 9 (gauge freedom); S. Umeyama, PAMI 1991;
+W. Baarda, "S-transformations and criterion matrices", 1973.
 """
 import time
 from dataclasses import dataclass
