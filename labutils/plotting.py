@@ -124,3 +124,15 @@ def plot_pose_errors_topview(ax, R_true, t_true, R_est, t_est, magnify=50.0, axi
     ax.set_xlabel("x")
     ax.set_ylabel("y")
     return ax
+
+
+def plot_inliers(ax, x, x_proj, inliers, image=None, image_size=None, size=6):
+    """Measured pixels split by a robust fit: inliers (green, with a segment to their reprojection
+    ``x_proj``) and rejected points (red crosses), over an image or an empty frame of ``image_size``."""
+    x, x_proj, inliers = np.asarray(x, float), np.asarray(x_proj, float), np.asarray(inliers, bool)
+    plot_image_points(ax, x[inliers], image=image, image_size=image_size, color="limegreen", size=size,
+                      label=f"inliers ({inliers.sum()})")
+    for a, b in zip(x[inliers], x_proj[inliers]):
+        ax.plot([a[0], b[0]], [a[1], b[1]], color="yellow", lw=0.8)
+    ax.scatter(*x[~inliers].T, s=2 * size, c="red", marker="x", lw=0.8, label=f"rejected ({(~inliers).sum()})")
+    return ax
