@@ -627,6 +627,71 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, 
     return res.R, res.t, info_X, info
 
 
+def reconstruct_without_ba(tracks, K, order, rng, *, threshold_px=10.0, min_angle_deg=1.0, refine=True):
+    """Incremental reconstruction *without* bundle adjustment: the "before BA" of the noise study.
+
+    The same steps as :func:`labutils.sfm.incremental_sfm` minus every joint adjustment: the relative
+    pose of the first two views of ``order`` (:func:`labutils.sfm.two_view_reconstruction`), then each
+    further view in ``order`` by P3P-RANSAC on the points triangulated so far
+    (:func:`labutils.pnp.pnp_ransac`, with ``refine`` its own pose only), and the tracks it completes
+    triangulated (:func:`labutils.sfm.triangulate_tracks`). Errors of early views propagate to later
+    ones: that is the drift bundle adjustment removes.
+
+    Parameters
+    ----------
+    tracks : (V, T, 2) array_like
+        Pixels, NaN where unseen.
+    K : (3, 3) array_like
+    order : sequence of int
+        The views in the order to add them, e.g. ``Reconstruction.order`` of an SfM run.
+    rng : numpy.random.Generator
+    threshold_px, min_angle_deg : float
+        As in :func:`labutils.sfm.incremental_sfm`.
+    refine : bool
+        Refine each new pose on its inliers (still no joint adjustment).
+
+    Returns
+    -------
+    R : (V, 3, 3) ndarray
+    t : (V, 3) ndarray
+        NaN for views not registered.
+    X : (T, 3) ndarray
+        NaN for tracks not triangulated.
+    """
+    from .pnp import pnp_ransac
+    from .sfm import triangulate_tracks, two_view_reconstruction
+
+    tracks = np.asarray(tracks, float)
+    if tracks.ndim != 3 or tracks.shape[-1] != 2:
+        raise ValueError(f"tracks must have shape (V, T, 2); got {tracks.shape}")
+    V, T = tracks.shape[:2]
+    order = [int(v) for v in order]
+    if len(order) < 2 or len(set(order)) != len(order) or min(order) < 0 or max(order) >= V:
+        raise ValueError(f"order must list at least two different views in 0..{V - 1}")
+    Ks = np.broadcast_to(as_matrix(K, "K", (3, 3)), (V, 3, 3))
+    seen = np.all(np.isfinite(tracks), axis=-1)
+    R, t, X = np.full((V, 3, 3), np.nan), np.full((V, 3), np.nan), np.full((T, 3), np.nan)
+    i, j = order[:2]
+    idx = np.flatnonzero(seen[i] & seen[j])
+    R[j], t[j], X[idx], _ = two_view_reconstruction(tracks[i, idx], tracks[j, idx], Ks[i], Ks[j], rng,
+                                                    threshold_px=threshold_px, min_angle_deg=min_angle_deg)
+    R[i], t[i] = np.eye(3), np.zeros(3)
+    for v in order[2:]:
+        idx = np.flatnonzero(seen[v] & np.isfinite(X[:, 0]))
+        if idx.size < 6:
+            continue
+        try:
+            R[v], t[v], _ = pnp_ransac(X[idx], tracks[v, idx], Ks[v], threshold=threshold_px, rng=rng, refine=refine)
+        except ValueError:
+            continue
+        reg = np.flatnonzero(np.isfinite(t[:, 0]))
+        new = np.flatnonzero(~np.isfinite(X[:, 0]) & seen[v] & (seen[reg].sum(0) >= 2))
+        if new.size:
+            X[new] = triangulate_tracks(tracks[:, new], Ks, R, t, reg, seen[:, new], max_error_px=threshold_px,
+                                        min_angle_deg=min_angle_deg)[0]
+    return R, t, X
+
+
 def rms_errors(rot_deg, centre_rel, axis=None):
     """RMS of per-camera errors (NaN-aware), e.g. over cameras and trials: ``(rot, centre)``."""
     return (np.sqrt(np.nanmean(np.square(rot_deg), axis=axis)),
@@ -676,18 +741,20 @@ class Progress:
 
 @dataclass
 class NoiseStudy:
-    """Pose errors of a pipeline over noise levels and trials (see :func:`run_noise_study`).
+    """Pose errors of one pipeline over noise levels and trials (see :func:`run_noise_study`).
 
     Attributes
     ----------
     sigmas : list of float
     rot_deg, centre_rel : dict float -> (T, V) ndarray
-        Per trial and camera, after similarity alignment of the registered cameras' centres
-        (NaN for a camera the pipeline did not register).
+        Per trial and camera, after similarity alignment of the registered cameras' centres; NaN for
+        a camera the pipeline did not register, and for every camera of a failed trial.
     estimates : dict float -> list of (R, t)
-        The raw estimates (the pipeline's own gauge), for plotting single trials.
+        The raw estimates (the pipeline's own gauge; NaN for a failed trial), for single-trial plots.
     seconds : dict float -> (T,) ndarray
         Wall time of each pipeline call.
+    failures : dict float -> list of str
+        Why trials failed (the pipeline raised ``ValueError``, or registered fewer than 3 views).
     """
 
     sigmas: list
@@ -695,22 +762,32 @@ class NoiseStudy:
     centre_rel: dict
     estimates: dict
     seconds: dict
+    failures: dict
+
+    def n_ok(self, sigma):
+        """Trials at ``sigma`` that produced at least 3 registered views."""
+        return int(np.sum(np.any(np.isfinite(self.rot_deg[sigma]), axis=1)))
 
     def rms(self, which="rot"):
-        """RMS error over cameras and trials, one per sigma: ``(S,)`` array."""
+        """RMS error over cameras and successful trials, one per sigma: ``(S,)`` (NaN if none)."""
         d = self.rot_deg if which == "rot" else self.centre_rel
-        return np.array([np.sqrt(np.nanmean(d[s] ** 2)) for s in self.sigmas])
+        return np.array([np.sqrt(np.nanmean(d[s] ** 2)) if np.isfinite(d[s]).any() else np.nan for s in self.sigmas])
 
     def table(self, pred=None):
-        """A printable table: per sigma the trial count, mean ± sd and RMS of both errors, and, given
-        a :class:`PosePrediction` for σ = 1, the predicted RMS and the ratio empirical / predicted."""
-        head = f"{'sigma':>6} {'trials':>6} | {'rot mean ± sd (deg)':>22} {'RMS':>9}"
+        """A printable table: per sigma the successful / total trials, mean ± sd and RMS of both
+        errors and, given a :class:`PosePrediction` for σ = 1, the predicted RMS and the ratio
+        empirical / predicted."""
+        head = f"{'sigma':>6} {'ok/trials':>9} | {'rot mean ± sd (deg)':>22} {'RMS':>9}"
         head += f" {'pred':>9} {'ratio':>6}" if pred else ""
         head += f" | {'centre mean ± sd (rel)':>24} {'RMS':>9}" + (f" {'pred':>9} {'ratio':>6}" if pred else "")
         lines = [head]
         for s, r_rms, c_rms in zip(self.sigmas, self.rms("rot"), self.rms("centre")):
             r, c = self.rot_deg[s], self.centre_rel[s]
-            row = f"{s:6.2f} {len(r):6d} | {np.nanmean(r):10.3g} ± {np.nanstd(r):9.3g} {r_rms:9.3g}"
+            ok = f"{self.n_ok(s)}/{len(r)}"
+            if not np.isfinite(r).any():
+                lines.append(f"{s:6.2f} {ok:>9} | (every trial failed: {self.failures[s][0][:60]})")
+                continue
+            row = f"{s:6.2f} {ok:>9} | {np.nanmean(r):10.3g} ± {np.nanstd(r):9.3g} {r_rms:9.3g}"
             if pred:
                 row += f" {pred.rot_rms_deg_all * s:9.3g} {r_rms / (pred.rot_rms_deg_all * s) if s > 0 else np.nan:6.3f}"
             row += f" | {np.nanmean(c):11.3g} ± {np.nanstd(c):10.3g} {c_rms:9.3g}"
@@ -720,49 +797,70 @@ class NoiseStudy:
         return "\n".join(lines)
 
 
-def run_noise_study(scene, reconstruct, sigmas, n_trials, rng, label="trials", keep_estimates=True):
-    """Run ``reconstruct`` on noisy copies of ``scene.x_true`` and measure the aligned pose errors.
+def run_noise_study(scene, pipelines, sigmas, n_trials, rng, label="trials", keep_estimates=True):
+    """Run pipelines on noisy copies of ``scene.x_true`` and measure their aligned pose errors.
+
+    Every trial draws one noise sample and gives the same observations to every pipeline, so
+    pipelines can be compared trial by trial.
 
     Parameters
     ----------
     scene : labutils.data.Scene
         Ground truth: ``R, t`` and the noise-free projections ``x_true`` (NaN where unseen).
-    reconstruct : callable
+    pipelines : callable or dict str -> callable
         ``reconstruct(scene, x_meas, sigma, rng) -> (R, t)``, NaN poses for unregistered views: the
-        pipeline under study (BA from the truth, or the full incremental SfM). It is told the noise
-        level, as a real pipeline is told its thresholds.
+        pipeline under study (the incremental SfM, or BA from the truth). It is told the noise level,
+        as a real pipeline is told its thresholds. A ``ValueError`` it raises counts as a failed trial.
     sigmas : sequence of float
         Pixel noise levels.
     n_trials : int or dict float -> int
         Trials per level.
     rng : numpy.random.Generator
-        Draws the noise and is passed on to ``reconstruct``.
+        Draws the noise and is passed on to the pipelines.
 
     Returns
     -------
-    NoiseStudy
+    NoiseStudy, or dict str -> NoiseStudy when ``pipelines`` is a dict.
     """
     if not isinstance(rng, np.random.Generator):
         raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    single = callable(pipelines)
+    pipes = {"pipeline": pipelines} if single else dict(pipelines)
+    if not pipes or not all(callable(f) for f in pipes.values()):
+        raise ValueError("pipelines must be a callable or a non-empty dict of callables")
     sigmas = [float(s) for s in sigmas]
     counts = {s: int(n_trials[s] if isinstance(n_trials, dict) else n_trials) for s in sigmas}
     if min(counts.values()) < 1:
         raise ValueError(f"need at least one trial per noise level; got {counts}")
     progress = Progress(sum(counts.values()), label)
     V = scene.n_views
-    rot, cen, est, sec = {}, {}, {}, {}
+    out = {name: NoiseStudy(sigmas=sigmas, rot_deg={}, centre_rel={}, estimates={}, seconds={}, failures={})
+           for name in pipes}
     for s in sigmas:
-        rot[s], cen[s] = np.full((counts[s], V), np.nan), np.full((counts[s], V), np.nan)
-        est[s], sec[s] = [], np.zeros(counts[s])
+        for st in out.values():
+            st.rot_deg[s], st.centre_rel[s] = np.full((counts[s], V), np.nan), np.full((counts[s], V), np.nan)
+            st.estimates[s], st.seconds[s], st.failures[s] = [], np.zeros(counts[s]), []
         for k in range(counts[s]):
             x_meas, _ = noisy_observations(scene.x_true, s, rng)
-            tic = time.perf_counter()
-            R, t = reconstruct(scene, x_meas, s, rng)
-            sec[s][k] = time.perf_counter() - tic
-            ok = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
-            if ok.sum() >= 3:
-                rot[s][k, ok], cen[s][k, ok] = pose_errors(R[ok], t[ok], scene.R[ok], scene.t[ok])
-            if keep_estimates:
-                est[s].append((np.asarray(R), np.asarray(t)))
+            for name, reconstruct in pipes.items():
+                st = out[name]
+                tic = time.perf_counter()
+                why = None
+                try:
+                    R, t = reconstruct(scene, x_meas, s, rng)
+                    R, t = np.asarray(R, float), np.asarray(t, float)
+                except ValueError as exc:
+                    R, t = np.full((V, 3, 3), np.nan), np.full((V, 3), np.nan)
+                    why = f"trial {k}: {str(exc).splitlines()[0]}"
+                st.seconds[s][k] = time.perf_counter() - tic
+                ok = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
+                if ok.sum() >= 3:
+                    st.rot_deg[s][k, ok], st.centre_rel[s][k, ok] = pose_errors(R[ok], t[ok], scene.R[ok], scene.t[ok])
+                elif why is None:
+                    why = f"trial {k}: only {ok.sum()} views registered"
+                if why is not None:
+                    st.failures[s].append(why)
+                if keep_estimates:
+                    st.estimates[s].append((R, t))
             progress.step()
-    return NoiseStudy(sigmas=sigmas, rot_deg=rot, centre_rel=cen, estimates=est, seconds=sec)
+    return out["pipeline"] if single else out

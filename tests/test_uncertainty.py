@@ -196,14 +196,25 @@ def test_run_noise_study(small):
         R[5], t[5] = np.nan, np.nan                       # a view the pipeline failed to register
         return R, t
 
-    study = U.run_noise_study(s, reconstruct, [0.0, 1.0], {0.0: 1, 1.0: 3}, np.random.default_rng(5))
+    def fragile(scene, x_meas, sigma, rng):
+        if sigma > 0.5:
+            raise ValueError("no initial pair")
+        return scene.R, scene.t
+
+    both = U.run_noise_study(s, {"ba": reconstruct, "fragile": fragile}, [0.0, 1.0], {0.0: 1, 1.0: 3},
+                             np.random.default_rng(5))
+    study = both["ba"]
     assert study.rot_deg[1.0].shape == (3, len(s.R)) and len(study.estimates[1.0]) == 3
     assert np.all(np.isnan(study.rot_deg[1.0][:, 5])) and np.all(np.isfinite(np.delete(study.rot_deg[1.0], 5, 1)))
-    assert study.rms("rot")[0] < 1e-6 and study.rms("rot")[1] > 0
+    assert study.rms("rot")[0] < 1e-6 and study.rms("rot")[1] > 0 and study.n_ok(1.0) == 3
+    assert both["fragile"].n_ok(0.0) == 1 and both["fragile"].n_ok(1.0) == 0
+    assert len(both["fragile"].failures[1.0]) == 3 and np.isnan(both["fragile"].rms("rot")[1])
     pred = U.predict_pose_errors(s.R, s.t, s.X, ci, pi, s.K, 1.0)
-    assert "ratio" in study.table(pred) and len(study.table().splitlines()) == 3
+    assert "ratio" in study.table(pred) and "every trial failed" in both["fragile"].table(pred)
     with pytest.raises(ValueError, match="at least one trial"):
         U.run_noise_study(s, reconstruct, [1.0], 0, np.random.default_rng(5))
+    with pytest.raises(ValueError, match="pipelines"):
+        U.run_noise_study(s, {}, [1.0], 1, np.random.default_rng(5))
 
 
 def test_dino_prediction(dino):
