@@ -439,7 +439,7 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     cam = vid[slot, col[pair_of]]
     e = errors(np.nan_to_num(Xp[pair_of], posinf=0.0), cam, trk[pair_of])
     e[~np.isfinite(Xp[pair_of, 0])] = np.inf
-    inl = e <= max_error_px
+    inl = np.isfinite(e) & (e <= max_error_px)                            # inf: behind a camera
     count = np.bincount(pair_of, inl, col.size)
     most = np.zeros(N)
     np.maximum.at(most, trk, count)
@@ -456,7 +456,8 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
         X[todo] = _dlt(Ps, xs[:, todo], cons[:, todo])
         cam, pt = np.nonzero(use[:, todo])
         cons[:, todo] = False
-        cons[cam, todo[pt]] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt]) <= max_error_px
+        e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
+        cons[cam, todo[pt]] = np.isfinite(e) & (e <= max_error_px)
     use &= cons
     # 3. drop the worst observation while one reprojects too far
     todo = np.flatnonzero(use.sum(0) >= 2)
@@ -466,7 +467,8 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
         err = np.full((V, todo.size), -1.0)
         err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
         worst = np.argmax(err, axis=0)
-        bad = err[worst, np.arange(todo.size)] > max_error_px
+        e = err[worst, np.arange(todo.size)]
+        bad = np.isinf(e) | (e > max_error_px)
         use[worst[bad], todo[bad]] = False
         todo = todo[bad & (use[:, todo].sum(0) >= 2)]
     C = np.zeros((V, 3))
@@ -484,13 +486,17 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
 # ---------------------------------------------------------------------------------------------
 
 
-def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence=0.999, min_angle_deg=1.0):
-    """Relative pose and points from two views, as in the two-view notebooks (H&Z Sec. 9.6, 11.6, 12.2).
+def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence=0.999, min_angle_deg=1.0,
+                            refine=True, loss="cauchy", f_scale=1.0):
+    """Relative pose and points from two views, as in the two-view notebooks (H&Z Sec. 9.6, 11.6, 12.2, 18.1).
 
     F by RANSAC (Sampson distance below ``threshold_px``), ``E = K2ᵀ F K1``, the pose of the four
     decompositions that puts the points in front of both cameras, then DLT triangulation. A point is kept
     when it is an F inlier, in front of both cameras, reprojects within ``threshold_px`` in both views and
-    is seen under at least ``min_angle_deg``.
+    is seen under at least ``min_angle_deg``. With ``refine`` the pose and the points are then
+    bundle-adjusted (camera 1 and the baseline length held) and every correspondence is triangulated
+    again with the refined pose: F ignores the calibration, and from a narrow field of view (the
+    dinosaur's) its translation direction can be off by tens of degrees, which the calibrated BA repairs.
 
     Parameters
     ----------
@@ -498,6 +504,9 @@ def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence
         Corresponding pixels, N >= 8.
     K1, K2 : (3, 3) array_like
     rng : numpy.random.Generator
+    refine : bool
+    loss, f_scale : str, float
+        Loss of the refinement (see :func:`labutils.bundle.bundle_adjust`).
 
     Returns
     -------
@@ -518,12 +527,24 @@ def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence
     R, t = pose_from_essential(E, x1[inl], x2[inl], K1, K2)
     Ks = np.stack([K1, K2])
     Rs, ts = np.stack([np.eye(3), R]), np.stack([np.zeros(3), np.asarray(t, float).reshape(3)])
+    xs = np.stack([x1, x2])
     mask = np.tile(inl, (2, 1))
-    X, used = triangulate_tracks(np.stack([x1, x2]), Ks, Rs, ts, [0, 1], mask,
-                                 max_error_px=threshold_px, min_angle_deg=min_angle_deg)
+    # E is F projected onto the essential matrices: when F is poorly conditioned the pose is rough and the
+    # reprojection errors large, so before the refinement a point only has to be in front of both cameras
+    X, used = triangulate_tracks(xs, Ks, Rs, ts, [0, 1], mask, max_error_px=np.inf if refine else threshold_px,
+                                 min_angle_deg=min_angle_deg)
     ok = np.isfinite(X[:, 0])
+    if refine and ok.sum() >= 8:
+        ci, pi = np.nonzero(used[:, ok])
+        res = bundle_adjust(Rs, ts, X[ok], ci, pi, xs[ci, np.flatnonzero(ok)[pi]], Ks, loss=loss, f_scale=f_scale,
+                            fixed_cameras=[0])
+        s = np.linalg.norm(res.t[1])                              # keep ‖t‖ = 1 exactly
+        Rs, ts = np.stack([np.eye(3), res.R[1]]), np.stack([np.zeros(3), res.t[1] / s])
+        X, used = triangulate_tracks(xs, Ks, Rs, ts, [0, 1], np.ones_like(mask), max_error_px=threshold_px,
+                                     min_angle_deg=min_angle_deg)
+        ok = np.isfinite(X[:, 0])
     angle = ray_angles_deg(-np.einsum("vji,vj->vi", Rs, ts), np.where(ok[:, None], X, 0), used)
-    return R, ts[1], X, float(np.median(angle[ok])) if ok.any() else 0.0
+    return Rs[1], ts[1], X, float(np.median(angle[ok])) if ok.any() else 0.0
 
 
 def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_angle_deg=3.0, threshold_px=4.0,
@@ -532,8 +553,9 @@ def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_an
 
     The ``n_candidates`` pairs sharing the most tracks (at least ``min_tracks``) are each reconstructed
     with :func:`two_view_reconstruction`. Among those whose median triangulation angle reaches
-    ``min_angle_deg`` the pair with the most accepted points wins; if none does, the pair with the
-    widest median angle.
+    ``min_angle_deg`` the pair with the largest ``points × median angle`` wins (more points, and each
+    better determined: a point's depth error falls about as 1 / angle); if none reaches it, the pair with
+    the widest median angle.
 
     Parameters
     ----------
@@ -585,7 +607,7 @@ def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_an
                          + "; ".join(f"({r['i']}, {r['j']}): {r.get('failed', 'too few points')}" for r in table))
     wide = [k for k in usable if table[k]["median_angle"] >= min_angle_deg]
     if wide:
-        best = max(wide, key=lambda k: (table[k]["points"], -k))
+        best = max(wide, key=lambda k: (table[k]["points"] * table[k]["median_angle"], -k))
     else:
         best = max(usable, key=lambda k: (table[k]["median_angle"], -k))
     return results[best], table
@@ -658,7 +680,7 @@ class _State:
         return -np.einsum("vji,vj->vi", np.where(self.reg[:, None, None], self.R, 0), np.where(self.reg[:, None], self.t, 0))
 
 
-def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter):
+def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter, tol=1e-8):
     """Bundle-adjust cameras ``cams`` (global ids, those in ``fixed`` held) and points ``pts`` in place."""
     cams, pts = np.asarray(cams, int), np.asarray(pts, int)
     obs = st.used()[np.ix_(cams, pts)]
@@ -670,7 +692,7 @@ def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter):
     K = Ks[0] if np.all(Ks == Ks[:1]) else Ks
     fixed_local = np.flatnonzero(np.isin(cams, fixed)) if len(fixed) else None
     res = bundle_adjust(st.R[cams], st.t[cams], st.X[pts], ci, pi, x, K, loss=loss, f_scale=f_scale,
-                        fixed_cameras=fixed_local, max_iter=max_iter)
+                        fixed_cameras=fixed_local, max_iter=max_iter, tol=tol)
     st.R[cams], st.t[cams], st.X[pts] = res.R, res.t, res.X
     return res
 
@@ -710,11 +732,14 @@ def _triangulate_new(st, candidates, threshold_px, min_angle_deg):
     return int(ok.sum())
 
 
-def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_iter, note, timings, rounds=3):
+def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_iter, note, timings, rounds=3,
+                      tol=1e-6):
     """Triangulate every track afresh with the current cameras, then global BA and outlier removal in turn.
 
     Removal (every observation of a triangulated point judged afresh against ``threshold_px``) and BA
-    alternate until the inlier set no longer changes, at most ``rounds`` times after the first BA.
+    alternate until the inlier set no longer changes, at most ``rounds`` times after the first BA. The BAs
+    stop at a relative cost change of ``tol``: the robust (IRLS) solver creeps on for tens of iterations
+    more, moving the cameras by far less than the choice of a few observations at the threshold does.
     """
     t0 = time.perf_counter()
     views = np.flatnonzero(st.reg)
@@ -726,7 +751,7 @@ def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_ite
     timings["final_triangulation"] = time.perf_counter() - t0
     note(f"final: {n_new} tracks triangulated, {n_bad} observations rejected, {n_drop} points dropped")
     t0 = time.perf_counter()
-    res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter)
+    res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
     note(f"final BA 1: {res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations")
     for k in range(2, rounds + 2):
         before = st.used()
@@ -734,7 +759,7 @@ def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_ite
         if np.array_equal(before, st.used()):
             note(f"final: the inlier set is stable ({n_bad} observations beyond {threshold_px:g} px left out)")
             break
-        res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter)
+        res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
         note(f"final BA {k}: {n_bad} observations beyond {threshold_px:g} px left out, {n_drop} points dropped; "
              f"{res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations")
     timings["final_ba"] = time.perf_counter() - t0
