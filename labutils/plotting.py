@@ -136,3 +136,51 @@ def plot_inliers(ax, x, x_proj, inliers, image=None, image_size=None, size=6):
         ax.plot([a[0], b[0]], [a[1], b[1]], color="yellow", lw=0.8)
     ax.scatter(*x[~inliers].T, s=2 * size, c="red", marker="x", lw=0.8, label=f"rejected ({(~inliers).sum()})")
     return ax
+
+
+def plot_matches(ax, x1, x2, inliers=None, image=None, image_size=None, size=6):
+    """Correspondences drawn in image 1 as short segments ``x1 -> x2`` (the image motion).
+
+    Inliers (all, when ``inliers`` is None) in green, outliers in red; over ``image`` or an empty frame
+    of ``image_size`` (y pointing down).
+    """
+    x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
+    names = ("inliers", "outliers") if inliers is not None else ("matches", "")
+    inliers = np.ones(len(x1), bool) if inliers is None else np.asarray(inliers, bool)
+    if image is not None:
+        ax.imshow(image)
+    elif image_size is not None:
+        ax.set_xlim(0, image_size[0])
+        ax.set_ylim(image_size[1], 0)
+        ax.set_aspect("equal")
+    for mask, color, label in ((inliers, "limegreen", names[0]), (~inliers, "red", names[1])):
+        if mask.any():
+            seg = np.stack([x1[mask], x2[mask]], axis=1)
+            ax.plot(seg[:, :, 0].T, seg[:, :, 1].T, color=color, lw=0.8)
+            ax.scatter(x1[mask, 0], x1[mask, 1], s=size, c=color, label=f"{label} ({mask.sum()})")
+    return ax
+
+
+def plot_two_view_from_above(ax, R, t, X, front=None, limit=None, scale=0.3):
+    """A two-camera configuration seen from above: x against depth, in the frame of camera 1.
+
+    Camera 1 is ``[I | 0]`` and camera 2 ``[R | t]``; each is drawn as a small triangle (its field of view)
+    opening along its optical axis. Points ``X`` (N, 3) in camera-1 coordinates: green where ``front``
+    (e.g. in front of both cameras), red elsewhere. ``limit`` fixes a square frame ``±limit``.
+    """
+    R, t, X = np.asarray(R, float), np.asarray(t, float).reshape(3), np.asarray(X, float)
+    front = np.ones(len(X), bool) if front is None else np.asarray(front, bool)
+    for Rc, tc, name in ((np.eye(3), np.zeros(3), "1"), (R, t, "2")):
+        C = -Rc.T @ tc
+        fan = np.array([[-0.6, 0, 1.0], [0.6, 0, 1.0]]) * scale @ Rc + C      # two rays of the view cone
+        ax.plot([fan[0, 0], C[0], fan[1, 0]], [fan[0, 2], C[2], fan[1, 2]], color="C0", lw=1.5)
+        ax.text(C[0], C[2], f" C{name}", color="C0", fontsize=8, va="top")
+    ax.scatter(X[front, 0], X[front, 2], s=3, c="g", label="in front of both")
+    ax.scatter(X[~front, 0], X[~front, 2], s=3, c="r", label="behind a camera")
+    if limit is not None:
+        ax.set_xlim(-limit, limit)
+        ax.set_ylim(-limit, limit)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (camera 1)")
+    ax.set_ylabel("depth z (camera 1)")
+    return ax

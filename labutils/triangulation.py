@@ -1,6 +1,5 @@
-"""Triangulation: linear (DLT) from two or more views (H&Z Sec. 12.2).
-
-The optimal two-view method (H&Z Sec. 12.5) lives here too when it is added.
+"""Triangulation: linear (DLT) from two or more views (H&Z Sec. 12.2), and the optimal two-view
+correction (H&Z Sec. 12.5, Alg. 12.1) with the residual of an F built on it.
 """
 import numpy as np
 
