@@ -27,13 +27,13 @@ family. :func:`fundamental_8point` raises ``ValueError`` in two cases:
    Sampson errors of the linear H (DLT, codimension 2, 8 parameters) and of the rank-2 8-point F
    (codimension 1, 7 parameters). With Gaussian noise and a planar scene (or no baseline) both
    estimate σ², so ``rho ≈ 1``; parallax makes e_H grow. The test needs no σ. We raise when
-   ``rho < h_ratio = 1.25``. The threshold is a compromise we measured (σ = 1 px, ``make_scene``):
-   planar or pure-rotation data are caught about 70 % of the time at N = 50, 88 % at N = 100 and
-   ~100 % at N >= 200, while real 3D scenes are almost never rejected (forward motion at N = 50:
-   0.7 % of scenes, and 0.3 % of random 50-point subsets of a turntable pair — ones with parallax
-   close to the noise, where F is barely determined; none at N >= 100; the general layout: none). Below N = 50 the spread of ``rho`` under pure
-   noise is too wide to tell, and only the rank test applies: noisy degenerate data with few points
-   give an F that means nothing. ``h_ratio=None`` turns the test off.
+   ``rho < h_ratio = 1.25``, a compromise we measured (σ = 1 px, ``make_scene``, 200-1000 scenes
+   each): planar or pure-rotation data are caught 70-75 % of the time at N = 50, ~90 % at N = 100 and
+   98-100 % at N >= 200, while real 3D scenes are rarely rejected: at most ~1 % of forward-motion
+   scenes (at any N; those whose parallax is close to the noise, where F is barely determined),
+   0.3 % of random 50-point subsets of a turntable pair, none for the general layout. Below N = 50 the
+   spread of ``rho`` under pure noise is too wide to tell, and only the rank test applies: noisy
+   degenerate data with few points give an F that means nothing. ``h_ratio=None`` turns the test off.
 
 A scene with a dominant plane plus a few off-plane points is *not* degenerate and is accepted; RANSAC
 on such data may still lock onto the plane (DEGENSAC, Chum et al. 2005, is not implemented here).
@@ -46,9 +46,9 @@ from .ransac import ransac
 from .triangulation import _rank2_fundamental, fundamental_residual, triangulate, triangulate_optimal
 
 __all__ = ["fundamental_8point", "fundamental_7point", "sampson_distance", "fundamental_ransac",
-           "fundamental_gold_standard", "GoldStandardProblem", "epipole_search", "fundamental_residual", "homography_dlt",
-           "essential_from_fundamental", "decompose_essential", "pose_from_essential", "fundamental_from_pose",
-           "hartley_normalisation"]
+           "fundamental_gold_standard", "GoldStandardProblem", "epipole_search", "fundamental_residual",
+           "homography_dlt", "essential_from_fundamental", "decompose_essential", "pose_from_essential",
+           "fundamental_from_pose", "hartley_normalisation"]
 
 
 H_TEST_MIN_POINTS = 50        # the homography-vs-F degeneracy test needs this many correspondences
@@ -343,7 +343,7 @@ def fundamental_ransac(x1, x2, threshold=1.0, rng=None, confidence=0.999, max_it
     x1, x2 : (N, 2) array_like
         Putative correspondences, N >= 8.
     threshold : float
-        Inlier threshold on the Sampson distance, in pixels (about 2σ for noise σ: H&Z Table 4.1
+        Inlier threshold on the Sampson distance, in pixels (about 2σ for noise σ: H&Z Sec. 4.7.1
         gives t² = 3.84 σ² for a codimension-1 model).
     rng : numpy.random.Generator
         Required.
@@ -363,7 +363,8 @@ def fundamental_ransac(x1, x2, threshold=1.0, rng=None, confidence=0.999, max_it
     Raises
     ------
     ValueError
-        Bad input as for :func:`fundamental_8point`, no ``rng``, or no non-degenerate model found.
+        Bad input as for :func:`fundamental_8point`, no ``rng``, no non-degenerate sample, or degenerate
+        inliers (the final 8-point's checks).
 
     Examples
     --------
@@ -403,7 +404,7 @@ def epipole_search(x1, x2, n_dirs=400, n_best=1, min_angle_deg=8.0):
     """Global search for starting points of the gold standard: F with a given epipole, over a grid of epipoles.
 
     For a fixed right epipole e, the F with ``F e = 0`` that minimises the algebraic error is linear
-    (H&Z Sec. 11.4.2: ``F = G Bᵀ`` with B an orthonormal basis of e⊥, and G the smallest eigenvector of a
+    (H&Z Sec. 11.3: ``F = G Bᵀ`` with B an orthonormal basis of e⊥, and G the smallest eigenvector of a
     6×6 matrix). Its Sampson error is evaluated for ``n_dirs`` epipoles spread evenly over the projective
     plane (a Fibonacci hemisphere of directions in Hartley-normalised coordinates, so epipoles at
     infinity are included); the ``n_best`` lowest, at least ``min_angle_deg`` apart, are returned. When the
@@ -547,7 +548,7 @@ class GoldStandardProblem:
         import scipy.sparse
 
         A, B = self._blocks(p)
-        rows, cols, vals = self._pattern()
+        rows, cols = self._pattern()
         full = np.zeros((self.n, 4, 15))
         full[:, 2:, :12] = A
         full[:, :, 12:] = B
@@ -567,13 +568,13 @@ class GoldStandardProblem:
         i = np.arange(self.n)[:, None]
         rows = 4 * i + r[None]
         cols = np.where(c[None] < 12, c[None], 12 + 3 * i + (c[None] - 12))
-        return rows.ravel(), cols.ravel(), None
+        return rows.ravel(), cols.ravel()
 
     def sparsity(self):
         """Which Jacobian entries can be non-zero: a ``scipy.sparse`` 0/1 matrix (for ``jac_sparsity``)."""
         import scipy.sparse
 
-        rows, cols, _ = self._pattern()
+        rows, cols = self._pattern()
         return scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(4 * self.n, self.n_params))
 
     def F(self, p):
