@@ -70,13 +70,14 @@ def plot_epipolar_lines(ax, F, x, image_size, which=2, color="C2", lw=0.7):
     return ax
 
 
-def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None):
+def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, span=None):
     """Pose error against pixel noise, log–log (notebook 06).
 
     Markers: the empirical RMS over cameras and trials of a :class:`labutils.uncertainty.NoiseStudy`;
     error bars: the spread of the per-camera errors (16th to 84th percentile); dashed line: the
     predicted RMS ``σ · pred`` of a :class:`labutils.uncertainty.PosePrediction` made for σ = 1.
     ``which`` is ``'rot'`` (degrees) or ``'centre'`` (relative to the scene size). σ = 0 is left out.
+    ``span = (σ_min, σ_max)`` sets the extent of the predicted line (default: the study's levels).
     """
     s = np.array(study.sigmas, float)
     pos = s > 0
@@ -88,7 +89,8 @@ def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None):
                 capsize=3, color=color, label=label)
     if pred is not None:
         unit = pred.rot_rms_deg_all if which == "rot" else pred.centre_rms_rel_all
-        ss = np.array([s[pos].min() / 1.5, s[pos].max() * 1.5])
+        lo_hi = (s[pos].min(), s[pos].max()) if span is None else span
+        ss = np.array([lo_hi[0] / 1.5, lo_hi[1] * 1.5])
         ax.plot(ss, unit * ss, "--", color=color, lw=1, label=None if label is None else f"{label}: predicted")
     ax.set_xscale("log")
     ax.set_yscale("log")

@@ -211,6 +211,10 @@ def test_run_noise_study(small):
     assert len(both["fragile"].failures[1.0]) == 3 and np.isnan(both["fragile"].rms("rot")[1])
     pred = U.predict_pose_errors(s.R, s.t, s.X, ci, pi, s.K, 1.0)
     assert "ratio" in study.table(pred) and "every trial failed" in both["fragile"].table(pred)
+    # a trial far beyond the bound is flagged as a wrong basin, the others are kept
+    assert study.flag_wrong_basins(pred) == 0 and study.n_ok(1.0) == 3
+    study.rot_deg[1.0][1, :3] = 30.0
+    assert study.flag_wrong_basins(pred) == 1 and study.n_ok(1.0) == 2 and "wrong basin" in study.failures[1.0][-1]
     with pytest.raises(ValueError, match="at least one trial"):
         U.run_noise_study(s, reconstruct, [1.0], 0, np.random.default_rng(5))
     with pytest.raises(ValueError, match="pipelines"):
@@ -262,3 +266,41 @@ def test_bad_input(small):
         U.noisy_observations(s.x_true, 1.0, np.random.default_rng(0), outlier_ratio=0.1)
     with pytest.raises(ValueError, match="positive"):
         U.loglog_slope([0.0, 1.0], [1.0, 2.0])
+
+
+def test_common_noise_scales_one_pattern(small):
+    """With common random numbers the ML errors of one pattern scale with σ: the slope is ~1 per trial."""
+    s, _, _ = small
+
+    def ml(scene, x_meas, sigma, rng):
+        return U.ba_from_truth(scene, x_meas)[:2]
+
+    st = U.run_noise_study(s, ml, [0.25, 1.0, 4.0], 2, np.random.default_rng(6), common_noise=True)
+    per_trial = st.trial_rms("rot")                        # (levels, trials)
+    assert per_trial.shape == (3, 2)
+    assert np.allclose(per_trial / per_trial[1], np.array([0.25, 1.0, 4.0])[:, None], rtol=0.05)
+    assert abs(U.loglog_slope(st.sigmas, st.rms("centre")) - 1) < 0.05
+
+
+def test_sfm_reaches_the_ml_optimum_and_beats_no_ba(small):
+    """The full pipeline on σ = 0.5 px lands where BA from the truth does; without BA it drifts; σ = 0 is exact."""
+    from labutils.sfm import incremental_sfm
+
+    s, _, _ = small
+    rng = np.random.default_rng(7)
+    for sigma in (0.0, 0.5):
+        x_meas, _ = U.noisy_observations(s.x_true, sigma, rng)
+        rec = incremental_sfm(x_meas, s.K, rng, threshold_px=10.0, init_min_angle_deg=1.0, loss="linear")
+        R, t = U.refine_reconstruction(rec, x_meas, s.K)
+        rot, _ = pose_errors(R, t, s.R, s.t)
+        if sigma == 0:
+            assert rot.max() < 1e-6
+            continue
+        rot_ml, _ = pose_errors(*U.ba_from_truth(s, x_meas)[:2], s.R, s.t)
+        assert np.allclose(rot, rot_ml, rtol=0.02, atol=1e-3 * rot_ml.max())
+        R0, t0, X0 = U.reconstruct_without_ba(x_meas, s.K, rec.order, rng)
+        ok = np.isfinite(t0[:, 0])
+        assert ok.sum() >= 3 and X0.shape == (s.n_points, 3)
+        assert U.rms_errors(*pose_errors(R0[ok], t0[ok], s.R[ok], s.t[ok]))[0] > 2 * U.rms_errors(rot, rot)[0]
+    with pytest.raises(ValueError, match="order"):
+        U.reconstruct_without_ba(x_meas, s.K, [0, 0, 1], rng)
