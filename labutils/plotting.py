@@ -186,3 +186,24 @@ def plot_two_view_from_above(ax, R, t, X, front=None, limit=None, scale=0.3):
     ax.set_xlabel("x (camera 1)")
     ax.set_ylabel("depth z (camera 1)")
     return ax
+
+
+def plot_sparsity(ax, A, n_camera_cols=None, markersize=0.3, title=None, color="k"):
+    """Spy plot of a sparse matrix (a bundle-adjustment Jacobian or ``JᵀJ``), rows down, columns across.
+
+    Parameters
+    ----------
+    A : scipy.sparse matrix or ndarray
+    n_camera_cols : int, optional
+        Number of camera columns (``k · V``): a red line separates them from the point columns (and,
+        for a square matrix, the camera rows from the point rows).
+    """
+    ax.spy(A, markersize=markersize, aspect="auto", color=color)
+    if n_camera_cols:
+        ax.axvline(n_camera_cols - 0.5, color="C3", lw=0.8)
+        if A.shape[0] == A.shape[1]:
+            ax.axhline(n_camera_cols - 0.5, color="C3", lw=0.8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    ax.tick_params(labelsize=7)
+    return ax

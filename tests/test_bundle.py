@@ -147,6 +147,26 @@ def test_gauge_none_and_fixed_cameras(rng):
     assert np.abs(fixed.X - s.X).max() < 1e-8 and fixed.n_free == 3 * 6 + 3 * 60
 
 
+def test_one_fixed_camera_is_the_anchor(rng):
+    s, (R0, t0, X0, ci, pi, x) = perturbed_problem(rng, n_points=60, n_views=5)
+    res = bundle_adjust(R0, t0, X0, ci, pi, x, s.K, fixed_cameras=[2], tol=1e-12)
+    assert res.gauge["anchor"] == 2 and res.gauge["scale_camera"] == 0
+    assert np.abs(res.R[2] - R0[2]).max() < 1e-15 and np.abs(res.t[2] - t0[2]).max() < 1e-15
+    C = -np.einsum("vji,vj->vi", res.R, res.t)
+    C0 = -np.einsum("vji,vj->vi", R0, t0)
+    assert abs(np.linalg.norm(C[0] - C[2]) - np.linalg.norm(C0[0] - C0[2])) < 1e-12
+    assert pose_errors(res.R, res.t, s.R, s.t)[0].max() < 1e-6 and res.n_free == 4 * 6 - 1 + 3 * 60
+
+
+def test_single_threaded_blas_restores_the_thread_count():
+    from labutils.bundle import _openblas_controls, single_threaded_blas
+
+    before = [get() for get, _ in _openblas_controls()]
+    with single_threaded_blas():
+        assert all(get() == 1 for get, _ in _openblas_controls())
+    assert [get() for get, _ in _openblas_controls()] == before
+
+
 def test_pose_refinement_with_fixed_points(rng):
     """A PnP-style refinement: one camera, all points held."""
     s = make_scene(40, 2, noise_px=0.0, rng=rng)
