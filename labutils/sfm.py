@@ -3,18 +3,23 @@
 The pipeline (H&Z Ch. 18 and Sec. 9.6, 12.2, 18.1; Snavely, Seitz & Szeliski, "Photo tourism", 2006;
 Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
 
-1. **Initial pair**: among the pairs of views sharing the most tracks, estimate F robustly, then E and
-   the relative pose, triangulate, and keep the pair with the most inliers among those whose median
-   triangulation angle is large enough (a wide baseline makes a well-conditioned start).
+1. **Initial pair**: the pairs of views sharing the most tracks are each reconstructed (F by RANSAC, E,
+   the pose by cheirality, a calibrated two-view BA, triangulation); among those whose median
+   triangulation angle is large enough, the one with the largest ``points × median angle`` wins.
 2. **Register views one at a time**: the next view is the one that sees the most already-triangulated
    points; its pose comes from robust PnP (P3P in RANSAC, then refinement).
-3. **Triangulate** the tracks the new view shares with registered views (multi-view DLT), keeping a
-   point only if it lies in front of every camera, reprojects within the threshold in every view, and is
-   seen under a large enough angle.
+3. **Triangulate** the tracks the new view shares with registered views, robustly: the largest
+   consensus over all pairs of a track's observations, then multi-view DLT; a point is kept only if it
+   lies in front of every camera, reprojects within the threshold in every view it keeps, and is seen
+   under a large enough angle.
 4. **Bundle adjustment**: a local BA around each new view, a global BA whenever the model has grown
    by a fixed factor, then **outlier removal** (large reprojection errors, too small angles).
-5. **Final refinement**: complete the tracks with the final cameras, a global robust BA, outlier
-   removal and a second BA.
+5. **Final refinement**: every track triangulated afresh from the final cameras, a global robust BA,
+   outlier removal and BA again until the inlier set is stable. :func:`bundle_from_cameras` runs this
+   same last stage from given cameras (e.g. the ground truth): the bar the pipeline is judged against.
+
+All thresholds are in pixels; every bundle adjustment is :func:`labutils.bundle.bundle_adjust` (LM with
+the Schur complement) with a robust loss (Cauchy, scale 1 px, by default).
 
 The result is a :class:`Reconstruction`. Run it from the command line with
 ``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
@@ -34,7 +39,6 @@ from .bundle import bundle_adjust
 from .epipolar import essential_from_fundamental, fundamental_ransac, pose_from_essential
 from .metrics import align_cameras, apply_similarity, pose_errors
 from .pnp import pnp_ransac
-from .triangulation import triangulate_multiview
 
 # ---------------------------------------------------------------------------------------------
 # The record
@@ -123,14 +127,14 @@ class Reconstruction:
 
         ``cameras`` has one entry per view in input order, ``{"R": 3x3, "t": [3]}`` or ``None`` for a
         view that was not registered; ``points`` lists ``{"track": index, "X": [3], "views": [...]}``
-        for each triangulated track (``views``: the views whose observation supports it).
+        for each triangulated track (``views``: the views whose observation supports it); ``order`` is
+        the registration order. No timings: the same seed gives the same file.
         """
         cameras = [{"R": self.R[v].tolist(), "t": self.t[v].tolist()} if self.registered[v] else None
                    for v in range(self.n_views)]
         points = [{"track": int(k), "X": self.X[k].tolist(), "views": np.flatnonzero(self.inliers[:, k]).tolist()}
                   for k in np.flatnonzero(np.isfinite(self.X[:, 0]))]
-        return {"cameras": cameras, "points": points, "order": [int(v) for v in self.order],
-                "timings": {k: float(v) for k, v in self.timings.items()}}
+        return {"cameras": cameras, "points": points, "order": [int(v) for v in self.order]}
 
     def to_json(self, path):
         """Write :meth:`to_dict` to ``path`` (JSON)."""
@@ -153,12 +157,12 @@ def ply_text(X):
     property double y
     property double z
     end_header
-    1 2 3.5
+    1.0 2.0 3.5
     """
     X = np.asarray(X, float).reshape(-1, 3)
     head = ["ply", "format ascii 1.0", "comment written by labutils.sfm", f"element vertex {len(X)}",
             "property double x", "property double y", "property double z", "end_header"]
-    return "\n".join(head + [" ".join(f"{c:.17g}" for c in p) for p in X]) + "\n"
+    return "\n".join(head + [" ".join(repr(float(c)) for c in p) for p in X]) + "\n"
 
 
 def read_result_json(path):
@@ -301,19 +305,13 @@ def ray_angles_deg(C, X, mask):
     C, X, mask = np.asarray(C, float), np.asarray(X, float), np.asarray(mask, bool)
     n = mask.sum(0)
     angle = np.full(X.shape[0], np.nan)
-    ok = np.flatnonzero(n >= 2)
-    if ok.size == 0:
-        return angle
-    L = int(n[ok].max())
-    views = np.argsort(~mask[:, ok], axis=0, kind="stable")[:L]           # (L, N): observing views first
-    valid = np.take_along_axis(mask[:, ok], views, axis=0)                 # (L, N)
-    rays = X[ok][None] - C[views]                                          # (L, N, 3)
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    cos = np.einsum("ink,jnk->nij", rays, rays)
-    both = valid.T[:, :, None] & valid.T[:, None, :]
-    cos = np.where(both, cos, 1.0).min(axis=(1, 2))
-    # the chordal form is accurate at small angles: angle = 2 asin(|r_i - r_j| / 2)
-    angle[ok] = np.degrees(2 * np.arcsin(np.clip(np.sqrt(np.maximum(2 - 2 * cos, 0)) / 2, 0, 1)))
+    order = np.argsort(~mask, axis=0, kind="stable")                      # observing views first
+    for L in np.unique(n[n >= 2]):                                         # tracks grouped by length
+        cols = np.flatnonzero(n == L)
+        rays = X[cols][None] - C[order[:L, cols]]                          # (L, m, 3)
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        cos = np.einsum("imk,jmk->mij", rays, rays).min(axis=(1, 2))
+        angle[cols] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return angle
 
 
@@ -323,7 +321,8 @@ def _camera_matrices(K, R, t, views):
 
 def _dlt(Ps, xs, use):
     """Multi-view DLT of each column of ``xs`` (V, N, 2) from its observations in ``use`` (V, N), grouping
-    the tracks by length so each SVD sees only real rows (same result as :func:`triangulate_multiview`)."""
+    the tracks by length so each SVD sees only real rows (same result as
+    :func:`labutils.triangulation.triangulate_multiview`, faster when most views miss a track)."""
     V, N = use.shape
     X = np.full((N, 3), np.nan)
     n = use.sum(0)
@@ -394,7 +393,7 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     if N == 0 or views.size < 2:
         return X, np.zeros((V, N), bool)
     Ps = np.zeros((V, 3, 4))
-    Ps[views] = _camera_matrices(K, R, t, views)
+    Ps[views] = _camera_matrices(K / K[:, 2:, 2:], R, t, views)     # K33 > 0: q_z has the sign of the depth
     xs = np.where(use[..., None], tracks, 0.0)
 
     def errors(Xq, cam, col):
@@ -402,10 +401,10 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
         q = np.einsum("nij,nj->ni", Ps[cam], np.hstack([Xq, np.ones((len(Xq), 1))]))
         with np.errstate(divide="ignore", invalid="ignore"):
             e = np.linalg.norm(q[:, :2] / q[:, 2:] - xs[cam, col], axis=1)
-        e[~(q[:, 2] > 0)] = np.inf                   # K[2] = (0, 0, k33 > 0): q_z has the sign of the depth
+        e[~(q[:, 2] > 0)] = np.inf
         return e
 
-    # 1. every pair of observations of every track: two-view DLT, consensus in the whole track
+    # 1. every pair of observations of every track, and its consensus in the whole track
     cand = np.flatnonzero(use.sum(0) >= 2)
     if cand.size == 0:
         return X, np.zeros((V, N), bool)
@@ -471,8 +470,6 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
         bad = np.isinf(e) | (e > max_error_px)
         use[worst[bad], todo[bad]] = False
         todo = todo[bad & (use[:, todo].sum(0) >= 2)]
-    C = np.zeros((V, 3))
-    C[views] = -np.einsum("vji,vj->vi", R[views], t[views])
     ok = use.sum(0) >= 2
     angle = ray_angles_deg(C, np.where(ok[:, None], np.nan_to_num(X), 0.0), use & ok)
     ok &= angle >= min_angle_deg
@@ -537,7 +534,7 @@ def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence
     if refine and ok.sum() >= 8:
         ci, pi = np.nonzero(used[:, ok])
         res = bundle_adjust(Rs, ts, X[ok], ci, pi, xs[ci, np.flatnonzero(ok)[pi]], Ks, loss=loss, f_scale=f_scale,
-                            fixed_cameras=[0])
+                            fixed_cameras=[0], max_iter=30, tol=1e-6)     # a repair, not the last word
         s = np.linalg.norm(res.t[1])                              # keep ‖t‖ = 1 exactly
         Rs, ts = np.stack([np.eye(3), res.R[1]]), np.stack([np.zeros(3), res.t[1] / s])
         X, used = triangulate_tracks(xs, Ks, Rs, ts, [0, 1], np.ones_like(mask), max_error_px=threshold_px,
@@ -1143,8 +1140,7 @@ def read_calibration(path, n_views):
 def write_tracks(path, tracks):
     """Write ``tracks`` (V, T, 2), NaN where unseen, as a VGG track file (inverse of :func:`read_tracks`)."""
     a = np.asarray(tracks, float).transpose(1, 0, 2).reshape(np.shape(tracks)[1], -1)
-    a = np.where(np.isnan(a), -1.0, a)
-    Path(path).write_text("".join(" ".join(f"{v:.17g}" for v in row) + "\n" for row in a))
+    Path(path).write_text("".join(" ".join("-1" if np.isnan(v) else repr(float(v)) for v in row) + "\n" for row in a))
 
 
 def _write_atomically(path, text):
