@@ -107,6 +107,19 @@ def _canonical_sign(F):
     return F * np.sign(F.flat[np.argmax(np.abs(F))])
 
 
+def _null_space_svd(A):
+    """Singular values and right singular vectors of A (rows >= 1, 9 columns) without the large U.
+
+    ``full_matrices=True`` would build an N×N U (slow for many points); padding A with zero rows to
+    9 keeps the 9×9 V, so its last row is the null vector also when N < 9. Zero rows add zero singular
+    values at the end and change nothing else.
+    """
+    if A.shape[0] < A.shape[1]:
+        A = np.vstack([A, np.zeros((A.shape[1] - A.shape[0], A.shape[1]))])
+    _, s, Vt = np.linalg.svd(A, full_matrices=False)
+    return s, Vt
+
+
 def _enforce_rank2(F):
     U, s, Vt = np.linalg.svd(F)
     return (U[:, :2] * s[:2]) @ Vt[:2]
@@ -193,7 +206,7 @@ def homography_dlt(x1, x2):
     A[0::2, 6:9] = y2[:, 1:2] * y1_h
     A[1::2, 0:3] = y1_h
     A[1::2, 6:9] = -y2[:, 0:1] * y1_h
-    H = np.linalg.inv(T2) @ np.linalg.svd(A)[2][-1].reshape(3, 3) @ T1
+    H = np.linalg.inv(T2) @ _null_space_svd(A)[1][-1].reshape(3, 3) @ T1
     H /= np.linalg.norm(H)
     # Sampson error of the two constraints r = (x2 h3·X1 - h1·X1, y2 h3·X1 - h2·X1)
     X1 = np.hstack([x1, np.ones((n, 1))])
@@ -212,7 +225,7 @@ def homography_dlt(x1, x2):
 
 def _eight_point_normalised(y1, y2):
     """Rank-2 F from normalised points, and the singular values of the design matrix."""
-    _, s, Vt = np.linalg.svd(_design(y1, y2))          # full V: the null vector also when N = 8
+    s, Vt = _null_space_svd(_design(y1, y2))
     return _enforce_rank2(Vt[-1].reshape(3, 3)), s
 
 
@@ -311,8 +324,7 @@ def _seven_point(x1, x2):
         T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
     except ValueError:
         return []
-    A = _design(_apply(T1, x1), _apply(T2, x2))
-    _, s, Vt = np.linalg.svd(A)
+    s, Vt = _null_space_svd(_design(_apply(T1, x1), _apply(T2, x2)))
     if s[6] < 1e-8 * s[0]:
         return []
     F1, F2 = Vt[-2].reshape(3, 3), Vt[-1].reshape(3, 3)
