@@ -565,7 +565,7 @@ def noisy_observations(x_true, sigma, rng, outlier_ratio=0.0, image_size=None):
 
 
 def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, final_loss="linear", max_iter=100,
-                  R0=None, t0=None, X0=None):
+                  tol=1e-10, R0=None, t0=None, X0=None):
     """Bundle adjustment of ``x_meas`` started from the true cameras and points (the ML estimate).
 
     A stand-in for the full pipeline when only the ML estimate's behaviour matters: with noise of
@@ -583,6 +583,9 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, 
         reprojection error exceeds ``reject_px`` pixels and adjust again with ``final_loss`` (default
         plain least squares: the ML estimate on the kept observations); a point left with fewer than
         two observations is dropped (NaN in ``X``).
+    max_iter, tol :
+        Passed to :func:`labutils.bundle.bundle_adjust`; the tight default ``tol`` matters: an
+        adjustment started from the truth and stopped early is biased towards the truth.
     R0, t0, X0 : optional
         Another starting point than the truth.
 
@@ -602,7 +605,7 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, 
     X0 = scene.X if X0 is None else X0
     ci, pi, x2d = observations(x_meas)
     tic = time.perf_counter()
-    res = bundle_adjust(R0, t0, X0, ci, pi, x2d, scene.K, loss=loss, f_scale=f_scale, max_iter=max_iter)
+    res = bundle_adjust(R0, t0, X0, ci, pi, x2d, scene.K, loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
     n_iter = res.n_iter
     kept = np.ones(ci.size, bool)
     info_X = res.X
@@ -616,7 +619,7 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, reject_px=None, 
         remap = np.full(len(X0), -1)
         remap[pts] = np.arange(pts.size)
         res2 = bundle_adjust(res.R, res.t, res.X[pts], ci[kept], remap[pi[kept]], x2d[kept], scene.K,
-                             loss=final_loss, f_scale=f_scale, max_iter=max_iter)
+                             loss=final_loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
         X = np.full((len(X0), 3), np.nan)
         X[pts] = res2.X
         res = res2
