@@ -70,6 +70,64 @@ def plot_epipolar_lines(ax, F, x, image_size, which=2, color="C2", lw=0.7):
     return ax
 
 
+def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, span=None):
+    """Pose error against pixel noise, log–log (notebook 06).
+
+    Markers: the empirical RMS over cameras and trials of a :class:`labutils.uncertainty.NoiseStudy`;
+    error bars: the spread of the per-camera errors (16th to 84th percentile); dashed line: the
+    predicted RMS ``σ · pred`` of a :class:`labutils.uncertainty.PosePrediction` made for σ = 1.
+    ``which`` is ``'rot'`` (degrees) or ``'centre'`` (relative to the scene size). σ = 0 is left out.
+    ``span = (σ_min, σ_max)`` sets the extent of the predicted line (default: the study's levels).
+    """
+    s = np.array(study.sigmas, float)
+    pos = s > 0
+    d = study.rot_deg if which == "rot" else study.centre_rel
+    rms = study.rms(which)[pos]
+    lo = np.array([np.nanpercentile(d[x], 16) for x in s[pos]])
+    hi = np.array([np.nanpercentile(d[x], 84) for x in s[pos]])
+    ax.errorbar(s[pos], rms, yerr=[np.clip(rms - lo, 0, None), np.clip(hi - rms, 0, None)], fmt="o", ms=5,
+                capsize=3, color=color, label=label)
+    if pred is not None:
+        unit = pred.rot_rms_deg_all if which == "rot" else pred.centre_rms_rel_all
+        lo_hi = (s[pos].min(), s[pos].max()) if span is None else span
+        ss = np.array([lo_hi[0] / 1.5, lo_hi[1] * 1.5])
+        ax.plot(ss, unit * ss, "--", color=color, lw=1, label=None if label is None else f"{label}: predicted")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xticks(s[pos])
+    ax.set_xticklabels([f"{x:g}" for x in s[pos]])
+    ax.set_xticks([], minor=True)
+    ax.set_xlabel("pixel noise σ (px)")
+    ax.set_ylabel("rotation error (deg)" if which == "rot" else "centre error / scene size")
+    return ax
+
+
+def plot_pose_errors_topview(ax, R_true, t_true, R_est, t_est, magnify=50.0, axis_len=0.15):
+    """Top view (x, y) of true cameras (black) and estimated ones after similarity alignment (red),
+    with the errors of the centres and of the viewing directions magnified ``magnify`` times."""
+    from .metrics import align_cameras
+
+    R_true, t_true = np.asarray(R_true, float), np.asarray(t_true, float)
+    ok = np.all(np.isfinite(R_est), axis=(1, 2)) & np.all(np.isfinite(t_est), axis=1)
+    R_al, t_al, _ = align_cameras(np.asarray(R_est)[ok], np.asarray(t_est)[ok], R_true[ok], t_true[ok])
+    C = -np.einsum("vji,vj->vi", R_true, t_true)
+    C_al = -np.einsum("vji,vj->vi", R_al, t_al)
+    scale = axis_len * np.sqrt(((C - C.mean(0)) ** 2).sum(1).mean())
+    C_show = C[ok] + magnify * (C_al - C[ok])
+    z_true, z_al = R_true[:, 2], R_al[:, 2]              # viewing directions (third rows of R)
+    z_show = z_true[ok] + magnify * (z_al - z_true[ok])
+    for Ci, zi in zip(C, z_true):
+        ax.plot(*np.stack([Ci, Ci + scale * zi])[:, :2].T, color="k", lw=0.8)
+    for Ci, zi in zip(C_show, z_show):
+        ax.plot(*np.stack([Ci, Ci + scale * zi])[:, :2].T, color="C3", lw=0.8)
+    ax.plot(*C[:, :2].T, "k.", label="true")
+    ax.plot(*C_show[:, :2].T, "o", color="C3", ms=3, label=f"estimated, errors x{magnify:g}")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    return ax
+
+
 def plot_inliers(ax, x, x_proj, inliers, image=None, image_size=None, size=6):
     """Measured pixels split by a robust fit: inliers (green, with a segment to their reprojection
     ``x_proj``) and rejected points (red crosses), over an image or an empty frame of ``image_size``."""
@@ -127,6 +185,7 @@ def plot_two_view_from_above(ax, R, t, X, front=None, limit=None, scale=0.3):
     ax.set_aspect("equal")
     ax.set_xlabel("x (camera 1)")
     ax.set_ylabel("depth z (camera 1)")
+    return ax
 
 
 def plot_sparsity(ax, A, n_camera_cols=None, markersize=0.3, title=None, color="k"):
