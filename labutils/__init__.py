@@ -26,6 +26,7 @@ from .metrics import align_cameras, align_similarity, angle_between_deg, ml_resi
 from .pnp import bearings, p3p, p3p_bearings, pnp_ransac, refine_pose, reprojection_errors
 from .sfm import Reconstruction, bundle_from_cameras, camera_errors, incremental_sfm
 from .synthetic import make_scene
+from .uncertainty import aligned_pose_covariance, gauge_basis, predict_pose_errors, run_noise_study
 from .triangulation import fundamental_residual, triangulate, triangulate_multiview, triangulate_optimal
 
 __all__ = [
@@ -39,5 +40,6 @@ __all__ = [
     "fundamental_from_pose", "fundamental_gold_standard", "fundamental_ransac", "pose_from_essential",
     "sampson_distance", "fundamental_residual", "triangulate", "triangulate_multiview", "triangulate_optimal",
     "Reconstruction", "bundle_from_cameras", "camera_errors", "incremental_sfm",
+    "aligned_pose_covariance", "gauge_basis", "predict_pose_errors", "run_noise_study",
     "BundleResult", "bundle_adjust", "jacobian_sparsity", "reprojection_jacobian", "reprojection_residuals",
 ]

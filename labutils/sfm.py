@@ -694,6 +694,13 @@ def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter, tol=1e-8):
     return res
 
 
+def _cost_text(res):
+    """'a -> b px² in n iterations' for a BA result, or a note that there was nothing to adjust."""
+    if res is None:
+        return "nothing to adjust (no observations)"
+    return f"{res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations"
+
+
 def _filter(st, threshold_px, min_angle_deg, readmit=False):
     """Reject observations reprojecting beyond the threshold; drop points left with < 2 views or a small angle.
 
@@ -749,7 +756,7 @@ def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_ite
     note(f"final: {n_new} tracks triangulated, {n_bad} observations rejected, {n_drop} points dropped")
     t0 = time.perf_counter()
     res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
-    note(f"final BA 1: {res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations")
+    note(f"final BA 1: {_cost_text(res)}")
     for k in range(2, rounds + 2):
         before = st.used()
         n_bad, n_drop = _filter(st, threshold_px, min_angle_deg, readmit=True)
@@ -758,7 +765,7 @@ def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_ite
             break
         res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
         note(f"final BA {k}: {n_bad} observations beyond {threshold_px:g} px left out, {n_drop} points dropped; "
-             f"{res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations")
+             f"{_cost_text(res)}")
     timings["final_ba"] = time.perf_counter() - t0
 
 
@@ -866,7 +873,7 @@ def incremental_sfm(tracks, K, rng, *, init_pair=None, threshold_px=4.0, min_ang
     n_bad, n_drop = _filter(st, threshold_px, min_angle_deg)
     timings["initial_pair"] = time.perf_counter() - t0
     note(f"initial pair ({i}, {j}): {len(best['track'])} points, median angle {best['median_angle']:.1f} deg; "
-         f"BA cost {res.cost_initial:.4g} -> {res.cost_final:.4g}; {n_bad} observations rejected, {n_drop} points dropped")
+         f"BA {_cost_text(res)}; {n_bad} observations rejected, {n_drop} points dropped")
 
     # 2. register the other views one at a time
     n_last_global, failed = 2, {}
