@@ -129,6 +129,8 @@ class Scene:
         Which measurements were replaced by outliers, when known.
     tracks : (V, T, 2) ndarray or None
         Extra real tracks without 3D truth (the dinosaur's 4,983 ``viff`` tracks), NaN where unseen.
+    tracks_noise_px : float or None
+        The pixel noise of ``tracks`` when known (synthetic scenes).
     image_paths : list of Path or None
     """
 
@@ -144,6 +146,7 @@ class Scene:
     noise_px: float = None
     outliers: np.ndarray = None
     tracks: np.ndarray = None
+    tracks_noise_px: float = None
     image_paths: list = field(default=None, repr=False)
 
     @property

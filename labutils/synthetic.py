@@ -133,7 +133,8 @@ def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_
     if track_noise_px is not None:
         tracks, _ = _measure(x_true, seen, track_noise_px, track_outlier_ratio, (w, h), rng)
     return Scene(name=f"synthetic-{layout}", K=K, R=R, t=t, X=X, x_true=x_true, x_meas=x_meas,
-                 image_size=(w, h), source="synthetic", noise_px=noise_px, outliers=outliers, tracks=tracks)
+                 image_size=(w, h), source="synthetic", noise_px=noise_px, outliers=outliers, tracks=tracks,
+                 tracks_noise_px=noise_px if track_noise_px is None else track_noise_px)
 
 
 def _measure(x_true, seen, noise_px, outlier_ratio, image_size, rng):
