@@ -34,15 +34,21 @@ def plot_points(ax, X, color="k", size=1, label=None, **kwargs):
     return ax
 
 
-def plot_image_points(ax, x, image=None, image_size=None, color="C1", size=4, label=None, **kwargs):
-    """Pixels ``(N, 2)`` over an image (or an empty frame of ``image_size``), y pointing down."""
-    x = np.asarray(x, float)
+def image_frame(ax, image=None, image_size=None):
+    """Show ``image`` on ``ax``, or set up an empty pixel frame of ``image_size`` (y pointing down)."""
     if image is not None:
         ax.imshow(image)
     elif image_size is not None:
         ax.set_xlim(0, image_size[0])
         ax.set_ylim(image_size[1], 0)
         ax.set_aspect("equal")
+    return ax
+
+
+def plot_image_points(ax, x, image=None, image_size=None, color="C1", size=4, label=None, **kwargs):
+    """Pixels ``(N, 2)`` over an image (or an empty frame of ``image_size``), y pointing down."""
+    x = np.asarray(x, float)
+    image_frame(ax, image, image_size)
     ax.scatter(x[:, 0], x[:, 1], s=size, c=color, label=label, **kwargs)
     return ax
 
@@ -149,12 +155,7 @@ def plot_matches(ax, x1, x2, inliers=None, image=None, image_size=None, size=6):
     x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
     names = ("inliers", "outliers") if inliers is not None else ("matches", "")
     inliers = np.ones(len(x1), bool) if inliers is None else np.asarray(inliers, bool)
-    if image is not None:
-        ax.imshow(image)
-    elif image_size is not None:
-        ax.set_xlim(0, image_size[0])
-        ax.set_ylim(image_size[1], 0)
-        ax.set_aspect("equal")
+    image_frame(ax, image, image_size)
     for mask, color, label in ((inliers, "limegreen", names[0]), (~inliers, "red", names[1])):
         if mask.any():
             seg = np.stack([x1[mask], x2[mask]], axis=1)
