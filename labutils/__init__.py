@@ -15,7 +15,9 @@ Conventions, used everywhere in this package and the notebooks
 
 References: Hartley & Zisserman, *Multiple View Geometry*, 2nd ed. (cited as H&Z).
 """
-from .bundle import BundleResult, bundle_adjust, jacobian_sparsity, reprojection_jacobian, reprojection_residuals
+from .bal import read_bal, write_bal
+from .bundle import (BundleResult, Rt_from_camera_params, bundle_adjust, camera_params_from_Rt, jacobian_sparsity,
+                     reprojection_jacobian, reprojection_residuals)
 from .data import DataNotFoundError, Scene, data_dirs, find_data, has_data, load_dino, load_scene, observations
 from .epipolar import (decompose_essential, essential_from_fundamental, fundamental_7point, fundamental_8point,
                        fundamental_from_pose, fundamental_gold_standard, fundamental_ransac, pose_from_essential,
@@ -41,5 +43,6 @@ __all__ = [
     "sampson_distance", "fundamental_residual", "triangulate", "triangulate_multiview", "triangulate_optimal",
     "Reconstruction", "bundle_from_cameras", "camera_errors", "incremental_sfm",
     "aligned_pose_covariance", "gauge_basis", "predict_pose_errors", "run_noise_study",
+    "read_bal", "write_bal", "Rt_from_camera_params", "camera_params_from_Rt",
     "BundleResult", "bundle_adjust", "jacobian_sparsity", "reprojection_jacobian", "reprojection_residuals",
 ]
