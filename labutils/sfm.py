@@ -39,6 +39,7 @@ from .bundle import bundle_adjust
 from .epipolar import essential_from_fundamental, fundamental_ransac, pose_from_essential
 from .metrics import align_cameras, apply_similarity, pose_errors
 from .pnp import pnp_ransac
+from .triangulation import triangulate_multiview
 
 # ---------------------------------------------------------------------------------------------
 # The record
@@ -319,27 +320,6 @@ def _camera_matrices(K, R, t, views):
     return np.einsum("vij,vjk->vik", K[views], np.concatenate([R[views], t[views, :, None]], axis=2))
 
 
-def _dlt(Ps, xs, use):
-    """Multi-view DLT of each column of ``xs`` (V, N, 2) from its observations in ``use`` (V, N), grouping
-    the tracks by length so each SVD sees only real rows (same result as
-    :func:`labutils.triangulation.triangulate_multiview`, faster when most views miss a track)."""
-    V, N = use.shape
-    X = np.full((N, 3), np.nan)
-    n = use.sum(0)
-    order = np.argsort(~use, axis=0, kind="stable")                        # observing views first
-    for L in np.unique(n[n >= 2]):
-        cols = np.flatnonzero(n == L)
-        v = order[:L, cols]                                                # (L, m)
-        P, x = Ps[v], xs[v, cols]                                          # (L, m, 3, 4), (L, m, 2)
-        A = x[..., None] * P[:, :, 2:3, :] - P[:, :, :2, :]                # (L, m, 2, 4)
-        A /= np.linalg.norm(A, axis=-1, keepdims=True)
-        A = A.transpose(1, 0, 2, 3).reshape(cols.size, 2 * L, 4)
-        Xh = np.linalg.svd(A)[2][:, -1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            X[cols] = Xh[:, :3] / Xh[:, 3:]
-    return X
-
-
 def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_deg):
     """Robust triangulation of tracks from registered views (H&Z Sec. 12.2; the idea of COLMAP's RANSAC
     triangulation, with every pair of views tried).
@@ -452,7 +432,7 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     # 2. refit on the consensus set and take the consensus again
     for _ in range(2):
         todo = np.flatnonzero(cons.sum(0) >= 2)
-        X[todo] = _dlt(Ps, xs[:, todo], cons[:, todo])
+        X[todo] = triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan))
         cam, pt = np.nonzero(use[:, todo])
         cons[:, todo] = False
         e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
@@ -461,7 +441,7 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     # 3. drop the worst observation while one reprojects too far
     todo = np.flatnonzero(use.sum(0) >= 2)
     while todo.size:
-        X[todo] = _dlt(Ps, xs[:, todo], use[:, todo])
+        X[todo] = triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan))
         cam, pt = np.nonzero(use[:, todo])
         err = np.full((V, todo.size), -1.0)
         err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])

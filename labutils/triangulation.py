@@ -80,16 +80,20 @@ def triangulate_multiview(Ps, xs):
     if not np.all(np.isfinite(Ps)):
         raise ValueError("Ps has non-finite entries")
     seen = np.all(np.isfinite(xs), axis=-1)                      # (V, N)
-    x = np.where(seen[..., None], xs, 0.0)
-    # rows (V, N, 2, 4): x * P[2] - P[0], y * P[2] - P[1]
-    A = x[..., None] * Ps[:, None, 2:3, :] - Ps[:, None, :2, :]
-    A = _normalise_rows(A) * seen[..., None, None]
-    A = A.transpose(1, 0, 2, 3).reshape(xs.shape[1], -1, 4)      # (N, 2V, 4)
-    _, _, Vt = np.linalg.svd(A)
-    X_h = Vt[:, -1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        X = X_h[:, :3] / X_h[:, 3:]
-    X[seen.sum(0) < 2] = np.nan
+    X = np.full((xs.shape[1], 3), np.nan)
+    n_seen = seen.sum(0)
+    order = np.argsort(~seen, axis=0, kind="stable")              # each point's observing views first
+    # group the points by how many views see them, so each SVD gets only real rows
+    for L in np.unique(n_seen[n_seen >= 2]):
+        cols = np.flatnonzero(n_seen == L)
+        v = order[:L, cols]                                        # (L, m) view indices
+        P, x = Ps[v], xs[v, cols]                                  # (L, m, 3, 4), (L, m, 2)
+        # rows x P[2] - P[0] and y P[2] - P[1], scaled to unit norm: (L, m, 2, 4)
+        A = _normalise_rows(x[..., None] * P[:, :, 2:3, :] - P[:, :, :2, :])
+        A = A.transpose(1, 0, 2, 3).reshape(cols.size, 2 * L, 4)
+        X_h = np.linalg.svd(A)[2][:, -1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            X[cols] = X_h[:, :3] / X_h[:, 3:]
     return X
 
 

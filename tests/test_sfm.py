@@ -337,12 +337,3 @@ def test_dino_real_tracks_match_ba_from_truth(dino):
     assert abs(rot.mean() - rot_ref.mean()) < 0.1 * rot_ref.mean()
     assert camera_errors(rec, ref.R, ref.t)[0].mean() < 0.1 * rot_ref.mean()
     assert cen.max() < 0.05
-
-
-def test_grouped_dlt_equals_triangulate_multiview():
-    from labutils.sfm import _dlt
-    from labutils.triangulation import triangulate_multiview
-    s = turntable(noise_px=0.5, seed=8)
-    seen = s.visible
-    ours = _dlt(s.P, np.where(seen[..., None], s.x_meas, 0.0), seen)
-    assert np.allclose(ours, triangulate_multiview(s.P, s.x_meas), rtol=0, atol=1e-9)
