@@ -213,6 +213,57 @@ class Scene:
                 f"{obs} observations{extra}")
 
 
+@dataclass
+class Views:
+    """Calibrated images without 3D truth: the cameras of a multi-view data set and its image files.
+
+    Attributes
+    ----------
+    name : str
+    K : (V, 3, 3) ndarray
+        Calibration of each view (``K[:, 2, 2] == 1``).
+    R : (V, 3, 3) ndarray
+    t : (V, 3) ndarray
+        Poses, ``x_cam = R[i] @ X + t[i]`` (the data set's own convention converted to ours).
+    image_paths : list of Path
+    image_size : (width, height)
+        Of the images as stored (before any ``scale`` given to :meth:`image`).
+    source : str
+        ``'real'`` or ``'synthetic'``.
+    """
+
+    name: str
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    image_paths: list = field(repr=False)
+    image_size: tuple = None
+    source: str = "real"
+
+    @property
+    def n_views(self):
+        return self.R.shape[0]
+
+    @property
+    def P(self):
+        """(V, 3, 4) camera matrices ``K @ [R | t]``."""
+        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
+
+    @property
+    def C(self):
+        """(V, 3) camera centres."""
+        return -np.einsum("vji,vj->vi", self.R, self.t)
+
+    def image(self, i):
+        """View ``i`` as an RGB ``(H, W, 3)`` uint8 array."""
+        import cv2
+
+        img = cv2.imread(str(self.image_paths[i]), cv2.IMREAD_COLOR)
+        if img is None:
+            raise DataNotFoundError(f"cannot read {self.image_paths[i]}")
+        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
 def load_dino():
     """The Oxford dinosaur (36 views, 720×576) from ``dino/BAdino2.mat`` on the data path.
 
