@@ -330,3 +330,92 @@ def load_scene(rng, verbose=True, **synthetic_kwargs):
     if verbose:
         print(scene.summary())
     return scene
+
+
+# ---------------------------------------------------------------------------------------------
+# Multi-view image sets with known cameras
+# ---------------------------------------------------------------------------------------------
+FOUNTAIN_HELP = """\
+The EPFL fountain-P11 set is not on the data path. Put it at <data>/fountain-P11/:
+  fountain-P11/images/0000.jpg ... 0010.jpg            11 images, 3072x2048
+  fountain-P11/gt_dense_cameras/0000.jpg.camera ...    K, R, C per image (Strecha et al., CVPR 2008)
+where <data> is $LABUTILS_DATA, the project's data/ folder, or ../shared/data/ beside the project."""
+
+TEMPLE_HELP = """\
+The Middlebury temple ring is not on the data path. Put it at <data>/templeRing/:
+  templeRing/templeR0001.png ... templeR0047.png   47 images, 640x480
+  templeRing/templeR_par.txt                       one line per image: name, K, R, t (P = K [R | t])
+where <data> is $LABUTILS_DATA, the project's data/ folder, or ../shared/data/ beside the project."""
+
+
+def load_fountain():
+    """The EPFL/Strecha fountain-P11 set: 11 views, 3072×2048, with known K, R, t.
+
+    The ``.camera`` files hold K, distortion (zero), R and the centre C with ``P = K [Rᵀ | -Rᵀ C]``
+    (their R maps camera to world); here ``R = Rᵀ_file`` and ``t = -Rᵀ_file C`` in our convention.
+
+    Returns
+    -------
+    Views
+
+    Raises
+    ------
+    DataNotFoundError
+        With the files expected and where to get them.
+    """
+    folder = find_data("fountain-P11/gt_dense_cameras", FOUNTAIN_HELP).parent
+    files = sorted((folder / "gt_dense_cameras").glob("*.jpg.camera"))
+    Ks, Rs, ts, paths = [], [], [], []
+    for f in files:
+        v = np.array(f.read_text().split(), float)
+        if v.size != 26:
+            raise ValueError(f"{f}: expected 26 numbers (K, distortion, R, C, width, height); got {v.size}")
+        K, R_c2w, C = v[:9].reshape(3, 3), v[12:21].reshape(3, 3), v[21:24]
+        Ks.append(K / K[2, 2])
+        Rs.append(R_c2w.T)
+        ts.append(-R_c2w.T @ C)
+        paths.append(folder / "images" / f.name[:-len(".camera")])
+    missing = [p for p in paths if not p.exists()]
+    if not files or missing:
+        raise DataNotFoundError(f"fountain-P11 is incomplete: {len(files)} camera files, missing images "
+                                f"{[str(p) for p in missing[:3]]}\n" + FOUNTAIN_HELP)
+    return Views(name="fountain-P11", K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths,
+                 image_size=(int(v[24]), int(v[25])))
+
+
+def load_temple():
+    """The Middlebury temple ring: 47 views, 640×480, with known K, R, t (``P = K [R | t]``).
+
+    The object's tight bounding box (from the set's README) is ``TEMPLE_BOX``.
+
+    Returns
+    -------
+    Views
+
+    Raises
+    ------
+    DataNotFoundError
+        With the files expected and where to get them.
+    """
+    par = find_data("templeRing/templeR_par.txt", TEMPLE_HELP)
+    lines = par.read_text().split("\n")
+    n = int(lines[0].split()[0])
+    Ks, Rs, ts, paths = [], [], [], []
+    for k, line in enumerate(lines[1:1 + n], 2):
+        tok = line.split()
+        if len(tok) != 22:
+            raise ValueError(f"{par}, line {k}: expected a name and 21 numbers; got {len(tok)} fields")
+        v = np.array(tok[1:], float)
+        Ks.append(v[:9].reshape(3, 3) / v[8])
+        Rs.append(v[9:18].reshape(3, 3))
+        ts.append(v[18:21])
+        paths.append(par.parent / tok[0])
+    missing = [p for p in paths if not p.exists()]
+    if missing:
+        raise DataNotFoundError(f"templeRing is incomplete: missing {[str(p) for p in missing[:3]]}\n" + TEMPLE_HELP)
+    return Views(name="templeRing", K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths,
+                 image_size=(640, 480))
+
+
+TEMPLE_BOX = np.array([[-0.023121, -0.038009, -0.091940], [0.078626, 0.121636, -0.017395]])
+"""The temple ring's tight bounding box (min corner, max corner), from the data set's README."""
