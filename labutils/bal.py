@@ -11,10 +11,14 @@ The camera looks down -z: ``P = R X + t``, ``p = -P[:2] / P[2]``, pixel
 ``f · (1 + k1‖p‖² + k2‖p‖⁴) · p`` about the image centre, y up (the ``'bal'`` model of
 :mod:`labutils.bundle`). Every error names the line of the file where it was found.
 """
+import bz2
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from ._cli import write_atomically
+from ._validation import as_points
 
 
 class BALFormatError(ValueError):
@@ -58,11 +62,17 @@ def _err(where, lineno, msg):
     return BALFormatError(f"{where}: line {lineno}: {msg}")
 
 
+_INT_MAX = np.iinfo(np.int64).max
+
+
 def _parse_int(tok, where, lineno, what):
     try:
-        return int(tok)
+        value = int(tok)
     except ValueError:
         raise _err(where, lineno, f"{what} must be an integer; got {tok!r}") from None
+    if abs(value) > _INT_MAX:
+        raise _err(where, lineno, f"{what} {tok} is too large")
+    return value
 
 
 def parse_bal(text, where="<string>"):
@@ -98,6 +108,8 @@ def parse_bal(text, where="<string>"):
     V, M, N = (_parse_int(tok, where, i + 1, name) for tok, name in zip(head, ("n_cameras", "n_points", "n_observations")))
     if V < 1 or M < 1 or N < 1:
         raise _err(where, i + 1, f"the counts must be positive; got {V} cameras, {M} points, {N} observations")
+    if max(V, M, N) > 10 ** 9:
+        raise _err(where, i + 1, f"the counts are implausibly large ({V}, {M}, {N})")
     first_obs = i + 1
     obs_lines = lines[first_obs:first_obs + N]
     if len(obs_lines) < N:
@@ -113,6 +125,9 @@ def parse_bal(text, where="<string>"):
     except ValueError:
         j = next(j for j, f in enumerate(fields) if not all(_is_int(t) for t in f[:2]))
         raise _err(where, first_obs + j + 1, f"camera and point indices must be integers; got {obs_lines[j].strip()!r}") from None
+    except OverflowError:
+        j = next(j for j, f in enumerate(fields) if max(abs(int(f[0])), abs(int(f[1]))) > _INT_MAX)
+        raise _err(where, first_obs + j + 1, f"an index is too large: {obs_lines[j].strip()!r}") from None
     xy = _to_float([t for f in fields for t in f[2:]], where, lambda j: first_obs + j // 2 + 1, "pixel coordinates")
     xy = xy.reshape(N, 2)
     for col, upper, what in ((0, V, "camera"), (1, M, "point")):
@@ -123,6 +138,12 @@ def parse_bal(text, where="<string>"):
                        f"{upper} {what}s: 0..{upper - 1})")
     # parameters: a stream of numbers, any number a line; remember each number's line
     rest = lines[first_obs + N:]
+    nxt = next((j for j, ln in enumerate(rest) if ln.strip()), None)
+    if nxt is not None:
+        f = rest[nxt].split()
+        if len(f) == 4 and _is_int(f[0]) and _is_int(f[1]):
+            raise _err(where, i + 1, f"the header says {N} observations, but line {first_obs + N + nxt + 1} is one "
+                       "more observation line ('camera point x y'): the count in the header is too small")
     toks, tok_line = [], []
     for j, ln in enumerate(rest):
         f = ln.split()
@@ -189,13 +210,42 @@ def read_bal(path):
         Malformed file, naming the line. ``FileNotFoundError`` if it does not exist.
     """
     path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise OSError(f"{path}: cannot read the BAL file ({exc.strerror or exc})") from None
     if path.suffix == ".bz2":
-        import bz2
+        try:
+            raw = bz2.decompress(raw)
+        except (OSError, ValueError, EOFError) as exc:
+            raise BALFormatError(f"{path}: not a valid bzip2 file ({exc})") from None
+    return parse_bal(raw.decode("ascii", errors="replace"), where=str(path))
 
-        text = bz2.decompress(path.read_bytes()).decode("ascii", errors="replace")
-    else:
-        text = path.read_text(encoding="ascii", errors="replace")
-    return parse_bal(text, where=str(path))
+
+def check_bal_problem(problem):
+    """Check that ``problem`` is a valid :class:`BALProblem` (what :func:`parse_bal` would accept), or ``ValueError``.
+
+    >>> check_bal_problem(BALProblem(np.zeros((1, 6)), np.zeros((1, 3)), np.zeros(1, int), np.zeros(1, int),
+    ...                              np.zeros((1, 2))))
+    Traceback (most recent call last):
+    ...
+    ValueError: camera_params must have shape (V, 9) (ω, t, f, k1, k2 per camera); got shape (1, 6)
+    """
+    cp = np.asarray(problem.camera_params, float)
+    if cp.ndim != 2 or cp.shape[1] != 9 or cp.shape[0] < 1:
+        raise ValueError(f"camera_params must have shape (V, 9) (ω, t, f, k1, k2 per camera); got shape {cp.shape}")
+    if not np.all(np.isfinite(cp)):
+        raise ValueError("camera_params has non-finite entries (NaN or inf)")
+    X = as_points(problem.points_3d, "points_3d", dim=3)
+    x = as_points(problem.points_2d, "points_2d", dim=2)
+    for name, a, upper in (("camera_indices", problem.camera_indices, cp.shape[0]),
+                           ("point_indices", problem.point_indices, X.shape[0])):
+        a = np.asarray(a)
+        if a.shape != (x.shape[0],) or (a.size and a.dtype.kind not in "iu"):
+            raise ValueError(f"{name} must be {x.shape[0]} integers (one per observation); got {a.dtype} shape {a.shape}")
+        bad = np.flatnonzero((a < 0) | (a >= upper))
+        if bad.size:
+            raise ValueError(f"{name}[{bad[0]}] = {a[bad[0]]} is out of range 0..{upper - 1}")
 
 
 def format_bal(problem):
@@ -205,6 +255,7 @@ def format_bal(problem):
     >>> parse_bal(format_bal(p)).camera_params[0, 6]
     np.float64(500.0)
     """
+    check_bal_problem(problem)
     p = problem
     out = [f"{p.n_cameras} {p.n_points} {p.n_observations}"]
     out += [f"{c} {j} {x:.16e} {y:.16e}" for c, j, (x, y) in zip(p.camera_indices.tolist(), p.point_indices.tolist(),
@@ -215,11 +266,6 @@ def format_bal(problem):
 
 
 def write_bal(path, problem):
-    """Write ``problem`` as a BAL file at ``path`` (atomically: a temporary file renamed into place)."""
-    import os
-
-    path = Path(path)
-    text = format_bal(problem)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="ascii")
-    os.replace(tmp, path)
+    """Write ``problem`` as a BAL file at ``path``: checked first (:func:`check_bal_problem`), then written
+    atomically (a temporary file in the same folder, renamed into place; removed on failure)."""
+    write_atomically(path, format_bal(problem))

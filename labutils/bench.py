@@ -15,14 +15,11 @@ mask (finite differences), with our analytic sparse Jacobian, and with tighter L
 (``x_scale='jac'`` throughout). pyceres / pycolmap are not project dependencies; the bench only reports
 whether ``pyceres`` is importable.
 
-Measured on the 2-core workbook machine (shared with other jobs; ``OPENBLAS_NUM_THREADS=1``):
-
-- dino: LM-Schur 13 iterations, 0.27 s, robust cost 5676.049; scipy with the mask 17 iterations, 3.2 s,
-  7e-5 above; with tight LSMR 15 iterations, 14.6 s, the same cost (-5e-9).
-- ladybug: LM-Schur 32 iterations, 1.9 s, cost 13344.29; scipy with the mask 410 iterations, 199 s
-  wall (113 s CPU), 13388.25 (0.33 % above; with ``tol=1e-8`` and 2000 iterations, 439 s CPU and
-  13394.48); with tight LSMR 72 iterations, 1322 s, 13352.11.
+The README's results table quotes what this prints on the 2-core workbook machine. Progress goes to stderr, one
+JSON document to stdout (``python -m labutils.bench ba | python -m json.tool`` works).
 """
+import argparse
+import importlib.util
 import json
 import os
 import sys
@@ -30,35 +27,19 @@ import time
 
 import numpy as np
 
+from . import _cli
+from .bal import read_bal
 from .bundle import bundle_adjust, solve_bal
-from .data import find_data, load_scene, observations
-from .geometry import P_from_KRt, rotation_from_angle_axis
+from .data import load_scene
+from .datapath import find_data
+from .geometry import P_from_KRt
 from .metrics import pose_errors
+from .scene import observations
+from .synthetic import perturb_cameras
 from .triangulation import triangulate_multiview
 
 
-def perturb_cameras(R, t, rng, rot_deg=1.0, rel_shift=0.02):
-    """Rotate each camera by a random ~``rot_deg`` degrees and move its centre by ~``rel_shift`` of the
-    mean distance of the centres from their centroid.
-
-    Returns
-    -------
-    R0 : (V, 3, 3) ndarray
-    t0 : (V, 3) ndarray
-
-    >>> R0, t0 = perturb_cameras(np.stack([np.eye(3)] * 3), np.eye(3), np.random.default_rng(0))
-    >>> R0.shape, t0.shape
-    ((3, 3, 3), (3, 3))
-    """
-    R, t = np.asarray(R, float), np.asarray(t, float)
-    C = -np.einsum("vji,vj->vi", R, t)
-    scale = np.linalg.norm(C - C.mean(0), axis=1).mean()
-    R0 = np.stack([rotation_from_angle_axis(rng.normal(size=3) * np.radians(rot_deg) / np.sqrt(3)) @ Ri for Ri in R])
-    C0 = C + rng.normal(size=C.shape) * rel_shift * scale / np.sqrt(3)
-    return R0, -np.einsum("vij,vj->vi", R0, C0)
-
-
-def dino_problem(rng, scene=None):
+def dino_problem(*, rng, scene=None):
     """The perturbed-camera problem on the dinosaur's real tracks (or the synthetic fallback's).
 
     Returns
@@ -66,10 +47,10 @@ def dino_problem(rng, scene=None):
     dict with ``scene``, ``R0``, ``t0``, ``X0`` (re-triangulated with the perturbed cameras),
     ``camera_indices``, ``point_indices``, ``points_2d`` (tracks seen in at least two views).
     """
-    scene = load_scene(rng, verbose=False) if scene is None else scene
+    scene = load_scene(rng=rng, verbose=False) if scene is None else scene
     tracks = scene.tracks
     tracks = tracks[:, np.isfinite(tracks[..., 0]).sum(0) >= 2]
-    R0, t0 = perturb_cameras(scene.R, scene.t, rng)
+    R0, t0 = perturb_cameras(scene.R, scene.t, rng=rng)
     Ps = np.stack([P_from_KRt(scene.K, Ri, ti) for Ri, ti in zip(R0, t0)])
     X0 = triangulate_multiview(Ps, tracks)
     ci, pi, x = observations(tracks)
@@ -98,67 +79,79 @@ SCIPY_VARIANTS = {
 }
 
 
-def bench_dino(max_iter_scipy=2000, variants=SCIPY_VARIANTS, loss="soft_l1", f_scale=2.0):
+def _say(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def bench_dino(max_iter_scipy=2000, variants=SCIPY_VARIANTS, loss="soft_l1", f_scale=2.0, progress=_say):
+    """LM-Schur and each scipy variant on :func:`dino_problem` (seed 0): a dict with the problem and one row per
+    run (seconds, iterations, costs, and how each compares with LM-Schur)."""
     rng = np.random.default_rng(0)
-    pb = dino_problem(rng)
+    pb = dino_problem(rng=rng)
     s = pb["scene"]
     args = (pb["R0"], pb["t0"], pb["X0"], pb["camera_indices"], pb["point_indices"], pb["points_2d"], s.K)
     rows = []
+    progress("dino: lm-schur ...")
     res, w, c = _timed(lambda: bundle_adjust(*args, loss=loss, f_scale=f_scale, max_iter=500))
     rows.append(_row(res, w, c, variant="lm-schur", rot_err_deg=float(pose_errors(res.R, res.t, s.R, s.t)[0].mean())))
+    progress(f"dino: lm-schur {w:.2f} s")
     for name, kw in variants.items():
+        progress(f"dino: {name} ...")
         r, w, c = _timed(lambda: bundle_adjust(*args, solver="scipy", loss=loss, f_scale=f_scale,
                                                max_iter=max_iter_scipy, **kw))
         rows.append(_row(r, w, c, variant=name, rel_to_lm=r.loss_cost_final / res.loss_cost_final - 1,
                          speedup_of_lm=round(w / rows[0]["seconds"], 1)))
+        progress(f"dino: {name} {w:.2f} s")
     return dict(problem=f"{s.source} dino: {s.n_views} cameras, {int(pb['X0'].shape[0])} points, "
                         f"{len(pb['points_2d'])} observations; cameras perturbed 1 deg / 2 %, {loss} f_scale={f_scale}",
                 runs=rows)
 
 
-def bench_ladybug(max_iter_scipy=2000, variants=None):
-    from .bal import read_bal
-
+def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
+    """LM-Schur and scipy on the BAL ladybug problem (every BAL parameter refined, plain least squares)."""
     if variants is None:                                   # the tight-LSMR runs take ~20 min each here
         variants = {"scipy-mask": SCIPY_VARIANTS["scipy-mask"]}
     p = read_bal(find_data("bal/problem-49-7776-pre.txt"))
     rows = []
+    progress("ladybug: lm-schur ...")
     (_, res), w, c = _timed(lambda: solve_bal(p, max_iter=500))
     rows.append(_row(res, w, c, variant="lm-schur"))
+    progress(f"ladybug: lm-schur {w:.2f} s")
     for name, kw in variants.items():
+        progress(f"ladybug: {name} ... (minutes)")
         (_, r), w, c = _timed(lambda: solve_bal(p, solver="scipy", max_iter=max_iter_scipy, **kw))
         rows.append(_row(r, w, c, variant=name, rel_to_lm=r.cost_final / res.cost_final - 1,
                          speedup_of_lm=round(w / rows[0]["seconds"], 1)))
-    rows.append(dict(reference="pyceres", available=_importable("pyceres"),
+        progress(f"ladybug: {name} {w:.2f} s")
+    rows.append(dict(reference="pyceres", available=importlib.util.find_spec("pyceres") is not None,
                      note="not a project dependency; not run"))
     return dict(problem="BAL ladybug problem-49-7776-pre: 49 cameras, 7776 points, 31843 observations; "
                         "all parameters (pose, f, k1, k2, points)", runs=rows)
 
 
-def _importable(name):
-    import importlib.util
-
-    return importlib.util.find_spec(name) is not None
+def _parser():
+    ap = argparse.ArgumentParser(prog="python -m labutils.bench",
+                                 description="Benchmarks, printed as one JSON document (never asserted).")
+    sub = ap.add_subparsers(dest="what", required=True)
+    ba = sub.add_parser("ba", help="bundle adjustment: LM-Schur against scipy's least_squares",
+                        description="Time LM-Schur against scipy on the dinosaur (default: four scipy variants, "
+                                    "~40 s) and the BAL ladybug problem (LM-Schur and scipy with the mask, ~4 min).")
+    size = ba.add_mutually_exclusive_group()
+    size.add_argument("--quick", action="store_true", help="LM-Schur and scipy-analytic only, <= 200 scipy evaluations")
+    size.add_argument("--all", action="store_true", help="also the tight-LSMR scipy variants on ladybug (~20 min each)")
+    return ap
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] != "ba":
-        print("usage: python -m labutils.bench ba [--quick | --all]\n"
-              "  default: dino with LM-Schur and four scipy variants (~40 s), ladybug with LM-Schur and scipy\n"
-              "           with the mask (~4 min)\n"
-              "  --quick: LM-Schur and scipy-analytic only, at most 200 scipy evaluations\n"
-              "  --all:   also the tight-LSMR scipy variants on ladybug (~20 min each)", file=sys.stderr)
-        return 2
-    quick, everything = "--quick" in argv, "--all" in argv
-    variants = {"scipy-analytic": SCIPY_VARIANTS["scipy-analytic"]} if quick else SCIPY_VARIANTS
-    n = 200 if quick else 2000
+    """``python -m labutils.bench ba [--quick | --all]``: progress on stderr, one JSON document on stdout."""
+    args = _parser().parse_args(argv)
+    variants = {"scipy-analytic": SCIPY_VARIANTS["scipy-analytic"]} if args.quick else SCIPY_VARIANTS
+    n = 200 if args.quick else 2000
     out = dict(machine=dict(cpus=os.cpu_count(), OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS"),
                             load_average=os.getloadavg()),
                dino=bench_dino(n, variants))
-    print(json.dumps(out["dino"], indent=1), flush=True)
     try:
-        out["ladybug"] = bench_ladybug(n, variants if (quick or everything) else None)
+        out["ladybug"] = bench_ladybug(n, variants if (args.quick or args.all) else None)
     except FileNotFoundError as exc:
         out["ladybug"] = dict(skipped=str(exc).splitlines()[0])
     print(json.dumps(out, indent=1))
@@ -166,4 +159,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -38,17 +38,22 @@ family. :func:`fundamental_8point` raises ``ValueError`` in two cases:
 A scene with a dominant plane plus a few off-plane points is *not* degenerate and is accepted; RANSAC
 on such data may still lock onto the plane (DEGENSAC, Chum et al. 2005, is not implemented here).
 """
-import numpy as np
+from dataclasses import dataclass, field
 
-from ._validation import as_matrix, as_points
+import numpy as np
+import scipy.sparse
+from numpy.typing import ArrayLike
+
+from ._validation import (as_calibration, as_count, as_fundamental, as_matrix, as_points, as_positive,
+                          as_rng, as_rotation)
 from .geometry import skew
 from .ransac import ransac
-from .triangulation import _rank2_fundamental, fundamental_residual, triangulate, triangulate_optimal
+from .triangulation import fundamental_residual, triangulate, triangulate_optimal
 
 __all__ = ["fundamental_8point", "fundamental_7point", "sampson_distance", "fundamental_ransac",
-           "fundamental_gold_standard", "GoldStandardProblem", "epipole_search", "fundamental_residual",
-           "homography_dlt", "essential_from_fundamental", "decompose_essential", "pose_from_essential",
-           "fundamental_from_pose", "hartley_normalisation"]
+           "fundamental_gold_standard", "GoldStandardProblem", "GoldStandardResult", "epipole_search",
+           "fundamental_residual", "homography_dlt", "essential_from_fundamental", "decompose_essential",
+           "pose_from_essential", "cheirality_counts", "fundamental_from_pose", "hartley_normalisation"]
 
 
 H_TEST_MIN_POINTS = 50        # the homography-vs-F degeneracy test needs this many correspondences
@@ -57,7 +62,7 @@ H_TEST_MIN_POINTS = 50        # the homography-vs-F degeneracy test needs this m
 # helpers
 # --------------------------------------------------------------------------------------------------
 
-def hartley_normalisation(x):
+def hartley_normalisation(x: ArrayLike) -> np.ndarray:
     """Similarity ``T`` moving points to centroid 0 and mean distance √2 from it (H&Z Sec. 4.4.4).
 
     Parameters
@@ -135,7 +140,7 @@ def _check_pair(x1, x2, min_n):
 # linear estimates
 # --------------------------------------------------------------------------------------------------
 
-def sampson_distance(F, x1, x2):
+def sampson_distance(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     """Sampson distance of each correspondence to F, in pixels (not squared) (H&Z eq. 11.9).
 
     ``d = |x2_hᵀ F x1_h| / sqrt((F x1_h)_1² + (F x1_h)_2² + (Fᵀ x2_h)_1² + (Fᵀ x2_h)_2²)``: the first-order
@@ -170,7 +175,7 @@ def sampson_distance(F, x1, x2):
         return np.where(den > 0, num / den, np.where(num > 0, np.inf, 0.0))
 
 
-def homography_dlt(x1, x2):
+def homography_dlt(x1: ArrayLike, x2: ArrayLike) -> tuple:
     """Normalised DLT homography ``x2_h ≃ H x1_h`` (H&Z Alg. 4.2), and its Sampson errors in pixels.
 
     Used here to recognise degenerate two-view data (a plane, or no baseline).
@@ -229,7 +234,7 @@ def _eight_point_normalised(y1, y2):
     return _enforce_rank2(Vt[-1].reshape(3, 3)), s
 
 
-def fundamental_8point(x1, x2, rank_tol=1e-8, h_ratio=1.25):
+def fundamental_8point(x1: ArrayLike, x2: ArrayLike, rank_tol: float = 1e-8, h_ratio: float = 1.25) -> np.ndarray:
     """Normalised 8-point estimate of F (Hartley 1997; H&Z Alg. 11.1).
 
     Steps: normalise each image (centroid 0, mean distance √2); build ``A`` with rows ``kron(x2_h, x1_h)``;
@@ -288,7 +293,7 @@ def fundamental_8point(x1, x2, rank_tol=1e-8, h_ratio=1.25):
     return F
 
 
-def fundamental_7point(x1, x2):
+def fundamental_7point(x1: ArrayLike, x2: ArrayLike) -> list:
     """The up to three F through exactly seven correspondences (H&Z Sec. 11.1.2).
 
     The 7×9 design matrix (normalised points) has a two-dimensional null space ``F = α F1 + (1 - α) F2``;
@@ -340,7 +345,8 @@ def _seven_point(x1, x2):
     return out
 
 
-def fundamental_ransac(x1, x2, threshold=1.0, rng=None, confidence=0.999, max_iter=10000, refits=5):
+def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator, threshold_px: float = 1.0,
+                       confidence: float = 0.999, max_iter: int = 10000, refits: int = 5) -> tuple:
     """Robust F: adaptive RANSAC on minimal 7-point samples, then the 8-point on the inliers (H&Z Alg. 11.4).
 
     Why 7-point samples: a sample of 7 instead of 8 needs fewer trials for the same confidence
@@ -354,11 +360,11 @@ def fundamental_ransac(x1, x2, threshold=1.0, rng=None, confidence=0.999, max_it
     ----------
     x1, x2 : (N, 2) array_like
         Putative correspondences, N >= 8.
-    threshold : float
-        Inlier threshold on the Sampson distance, in pixels (about 2σ for noise σ: H&Z Sec. 4.7.1
-        gives t² = 3.84 σ² for a codimension-1 model).
     rng : numpy.random.Generator
         Required.
+    threshold_px : float
+        Inlier threshold on the Sampson distance, in pixels (about 2σ for noise σ: H&Z Sec. 4.7.1
+        gives t² = 3.84 σ² for a codimension-1 model).
     confidence : float
         Probability that at least one sample was all inliers when sampling stops.
     max_iter : int
@@ -383,23 +389,22 @@ def fundamental_ransac(x1, x2, threshold=1.0, rng=None, confidence=0.999, max_it
     >>> from labutils.synthetic import make_scene
     >>> s = make_scene(60, 2, noise_px=0.5, outlier_ratio=0.2, rng=np.random.default_rng(0))
     >>> x1, x2, _ = s.pair(0, 1)
-    >>> F, inl = fundamental_ransac(x1, x2, threshold=1.5, rng=np.random.default_rng(0))
+    >>> F, inl = fundamental_ransac(x1, x2, threshold_px=1.5, rng=np.random.default_rng(0))
     >>> F.shape, inl.shape == (len(x1),)
     ((3, 3), True)
     """
     x1, x2 = _check_pair(x1, x2, 8)
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
-    if not threshold > 0:
-        raise ValueError(f"threshold must be a positive number of pixels; got {threshold}")
+    as_rng(rng)
+    threshold_px = as_positive(threshold_px, "threshold_px")
+    refits = as_count(refits, "refits", 0)
     F, inliers, _ = ransac(len(x1), 7, lambda idx: _seven_point(x1[idx], x2[idx]),
-                           lambda F: sampson_distance(F, x1, x2), threshold, rng,
+                           lambda F: sampson_distance(F, x1, x2), threshold_px, rng=rng,
                            confidence=confidence, max_iter=max_iter)
     for _ in range(refits):
         if inliers.sum() < 8:
             break
         F_new = fundamental_8point(x1[inliers], x2[inliers])     # raises if the inliers are degenerate
-        new = sampson_distance(F_new, x1, x2) < threshold
+        new = sampson_distance(F_new, x1, x2) < threshold_px
         if new.sum() < 8:
             break
         F, changed, inliers = F_new, np.any(new != inliers), new
@@ -412,7 +417,7 @@ def fundamental_ransac(x1, x2, threshold=1.0, rng=None, confidence=0.999, max_it
 # the gold standard (maximum likelihood)
 # --------------------------------------------------------------------------------------------------
 
-def epipole_search(x1, x2, n_dirs=400, n_best=1, min_angle_deg=8.0):
+def epipole_search(x1: ArrayLike, x2: ArrayLike, n_dirs: int = 400, n_best: int = 1, min_angle_deg: float = 8.0) -> list:
     """Global search for starting points of the gold standard: F with a given epipole, over a grid of epipoles.
 
     For a fixed right epipole e, the F with ``F e = 0`` that minimises the algebraic error is linear
@@ -503,7 +508,7 @@ class GoldStandardProblem:
 
     def __init__(self, x1, x2, F0):
         x1, x2 = _check_pair(x1, x2, 8)
-        F0 = _rank2_fundamental(F0, "F0")[0]
+        F0 = as_fundamental(F0, "F0")[0]
         self.x1, self.x2, self.n = x1, x2, len(x1)
         self.T1, self.T2 = hartley_normalisation(x1), hartley_normalisation(x2)
         self.s1, self.s2 = self.T1[0, 0], self.T2[0, 0]
@@ -557,8 +562,6 @@ class GoldStandardProblem:
 
     def jacobian(self, p):
         """Analytic Jacobian as a ``scipy.sparse.csr_matrix`` of shape ``(4N, 12 + 3N)``."""
-        import scipy.sparse
-
         A, B = self._blocks(p)
         rows, cols = self._pattern()
         full = np.zeros((self.n, 4, 15))
@@ -584,8 +587,6 @@ class GoldStandardProblem:
 
     def sparsity(self):
         """Which Jacobian entries can be non-zero: a ``scipy.sparse`` 0/1 matrix (for ``jac_sparsity``)."""
-        import scipy.sparse
-
         rows, cols = self._pattern()
         return scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(4 * self.n, self.n_params))
 
@@ -662,17 +663,51 @@ class GoldStandardProblem:
         return p, dict(cost=np.array(history), n_iter=it, converged=converged)
 
 
-def fundamental_gold_standard(x1, x2, F0=None, return_points=False, n_starts=1, max_iter=100, tol=1e-10,
-                              return_info=False):
+@dataclass
+class GoldStandardResult:
+    """What :func:`fundamental_gold_standard` returns.
+
+    Attributes
+    ----------
+    F : (3, 3) ndarray
+        The maximum-likelihood F: rank 2, unit Frobenius norm.
+    x1_hat, x2_hat : (N, 2) ndarray
+        The corrected pixels: the reprojections of the ML points, which satisfy ``x2_hatᵀ F x1_hat = 0``.
+    residual : float
+        RMS geometric residual over the 4N coordinates, ``sqrt(2 cost / (4 N))`` in pixels (the quantity
+        :func:`labutils.triangulation.fundamental_residual` computes for any F).
+    cost : (n,) ndarray
+        History of ``0.5 Σ r²`` (px²) of the winning run, per accepted step.
+    n_iter : int
+    converged : bool
+    start : int
+        Which start won: 0 for F0, then the epipole-search starts.
+    start_costs : (n_starts + 1,) ndarray
+        Final ``0.5 Σ r²`` of each start.
+    """
+
+    F: np.ndarray
+    x1_hat: np.ndarray = field(repr=False)
+    x2_hat: np.ndarray = field(repr=False)
+    residual: float
+    cost: np.ndarray = field(repr=False)
+    n_iter: int
+    converged: bool
+    start: int
+    start_costs: np.ndarray
+
+
+def fundamental_gold_standard(x1: ArrayLike, x2: ArrayLike, F0: ArrayLike = None, *, n_starts: int = 1,
+                              max_iter: int = 100, tol: float = 1e-10) -> GoldStandardResult:
     """Maximum-likelihood ("gold standard") F (H&Z Alg. 11.3).
 
     Minimises the reprojection error ``Σ |x1 - P1 X|² + |x2 - P2 X|²`` over the camera ``P2`` (12
     entries, with ``P1 = [I | 0]``) and the N points (:class:`GoldStandardProblem`), starting from ``F0``
     (the normalised 8-point if None): ``P2 = [[e']× F0 | e']`` and the points from the optimal correction.
     The solver is our own sparse Levenberg–Marquardt with an analytic Jacobian
-    (:meth:`GoldStandardProblem.solve`): the Schur complement leaves a 12×12 system per iteration, so
-    N = 200 takes about a millisecond per iteration. (``scipy.optimize.least_squares`` with
-    ``jac=problem.jacobian`` or ``jac_sparsity=problem.sparsity()`` solves the same problem, slower.)
+    (:meth:`GoldStandardProblem.solve`): the Schur complement leaves a 12×12 system per iteration.
+    (``scipy.optimize.least_squares`` with ``jac=problem.jacobian`` or ``jac_sparsity=problem.sparsity()``
+    solves the same problem, slower.)
 
     One addition makes it reliable when the epipole is inside the image (forward motion): there the
     cost has several local minima, the 8-point often starts in the wrong one, and LM can also stall
@@ -687,26 +722,17 @@ def fundamental_gold_standard(x1, x2, F0=None, return_points=False, n_starts=1, 
         Corresponding pixels, N >= 8 (inliers only: the cost is not robust).
     F0 : (3, 3) array_like, optional
         Initial F of rank 2.
-    return_points : bool
-        Also return the corrected pixels (the reprojections of the ML points).
     n_starts : int
         Extra starts from :func:`epipole_search` (0: only F0, the textbook algorithm).
     max_iter : int
         Levenberg–Marquardt iterations at most, per run.
     tol : float
         Stop when an iteration lowers the cost by less than ``tol`` times the cost.
-    return_info : bool
-        Also return a dict: ``cost`` (history of 0.5 Σ r² of the winning run), ``n_iter``, ``converged``,
-        ``start`` (0 for F0, then the epipole-search starts) and ``start_costs`` (final 0.5 Σ r² of each).
 
     Returns
     -------
-    F : (3, 3) ndarray
-        Rank 2, unit Frobenius norm.
-    x1_hat, x2_hat : (N, 2) ndarray
-        With ``return_points``.
-    info : dict
-        With ``return_info``.
+    GoldStandardResult
+        ``.F``, the corrected points ``.x1_hat, .x2_hat``, the ``.residual`` in pixels, and how it got there.
 
     Raises
     ------
@@ -718,12 +744,17 @@ def fundamental_gold_standard(x1, x2, F0=None, return_points=False, n_starts=1, 
     >>> from labutils.synthetic import make_scene
     >>> s = make_scene(30, 2, noise_px=1.0, rng=np.random.default_rng(0))
     >>> x1, x2, _ = s.pair(0, 1)
-    >>> F = fundamental_gold_standard(x1, x2)
-    >>> F.shape, bool(fundamental_residual(F, x1, x2) <= fundamental_residual(fundamental_8point(x1, x2), x1, x2))
+    >>> gs = fundamental_gold_standard(x1, x2)
+    >>> gs.F.shape, bool(gs.residual <= fundamental_residual(fundamental_8point(x1, x2), x1, x2))
     ((3, 3), True)
+    >>> bool(abs(gs.residual - fundamental_residual(gs.F, x1, x2)) < 1e-6)
+    True
     """
     x1, x2 = _check_pair(x1, x2, 8)
-    F0 = fundamental_8point(x1, x2) if F0 is None else _rank2_fundamental(F0, "F0")[0]
+    n_starts = as_count(n_starts, "n_starts", 0)
+    max_iter = as_count(max_iter, "max_iter", 1)
+    tol = as_positive(tol, "tol")
+    F0 = fundamental_8point(x1, x2) if F0 is None else as_fundamental(F0, "F0")[0]
     starts = [F0] + (epipole_search(x1, x2, n_best=n_starts) if n_starts > 0 else [])
     runs = []
     for F in starts:
@@ -733,27 +764,18 @@ def fundamental_gold_standard(x1, x2, F0=None, return_points=False, n_starts=1, 
     costs = np.array([run[2]["cost"][-1] for run in runs])
     best = int(np.argmin(costs))
     problem, p, info = runs[best]
-    info.update(start=best, start_costs=costs)
-    out = (problem.F(p),)
-    if return_points:
-        out += problem.points(p)
-    if return_info:
-        out += (info,)
-    return out if len(out) > 1 else out[0]
+    x1_hat, x2_hat = problem.points(p)
+    return GoldStandardResult(F=problem.F(p), x1_hat=x1_hat, x2_hat=x2_hat,
+                              residual=float(np.sqrt(2 * costs[best] / (4 * len(x1)))), cost=info["cost"],
+                              n_iter=int(info["n_iter"]), converged=bool(info["converged"]), start=best,
+                              start_costs=costs)
 
 
 # --------------------------------------------------------------------------------------------------
 # the essential matrix and the relative pose
 # --------------------------------------------------------------------------------------------------
 
-def _calibration(K, name):
-    K = as_matrix(K, name, (3, 3))
-    if abs(np.linalg.det(K)) <= 1e-12 * max(np.abs(K).max(), 1e-300) ** 3:
-        raise ValueError(f"{name} is singular: not a calibration matrix")
-    return K
-
-
-def fundamental_from_pose(K1, K2, R, t):
+def fundamental_from_pose(K1: ArrayLike, K2: ArrayLike, R: ArrayLike, t: ArrayLike) -> np.ndarray:
     """``F = K2⁻ᵀ [t]× R K1⁻¹`` for camera 2 ``[R | t]`` relative to camera 1 ``[I | 0]`` (H&Z eq. 9.2).
 
     Returns F with unit norm and the package's sign convention.
@@ -766,17 +788,20 @@ def fundamental_from_pose(K1, K2, R, t):
            [ 0.,  0.,  1.],
            [ 0., -1.,  0.]])
     """
-    K1, K2 = _calibration(K1, "K1"), _calibration(K2, "K2")
-    R = as_matrix(R, "R", (3, 3))
-    t = as_matrix(np.asarray(t, float).reshape(-1), "t", (3,))
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
+    R = as_rotation(R, "R")
+    t = as_matrix(t, "t", (3,))
+    if not np.linalg.norm(t) > 0:
+        raise ValueError("t is zero: with no baseline the two views are related by a homography and F is not defined")
     return _canonical_sign(np.linalg.inv(K2).T @ skew(t) @ R @ np.linalg.inv(K1))
 
 
-def essential_from_fundamental(F, K1, K2):
+def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np.ndarray:
     """``E = K2ᵀ F K1``, projected onto the essential manifold (H&Z eq. 9.12, Sec. 9.6.1).
 
-    The projection keeps the singular vectors and sets the singular values to ``(1, 1, 0)``: the
-    closest essential matrix in Frobenius norm, up to scale.
+    The projection keeps the singular vectors and sets the singular values to ``(1, 1, 0)``. The closest
+    essential matrix in Frobenius norm has singular values ``((σ₁ + σ₂)/2, (σ₁ + σ₂)/2, 0)`` (H&Z Result 9.18
+    and Sec. 11.7.3); since E is defined up to scale, this is the same matrix scaled to ``(1, 1, 0)``.
 
     Parameters
     ----------
@@ -797,14 +822,14 @@ def essential_from_fundamental(F, K1, K2):
     array([1., 1., 0.])
     """
     F = as_matrix(F, "F", (3, 3))
-    K1, K2 = _calibration(K1, "K1"), _calibration(K2, "K2")
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
     U, s, Vt = np.linalg.svd(K2.T @ F @ K1)
     if s[1] <= 1e-12 * s[0]:
         raise ValueError(f"K2ᵀ F K1 has rank < 2 (singular values {s}): F is not a fundamental matrix")
     return U @ np.diag([1.0, 1.0, 0.0]) @ Vt
 
 
-def decompose_essential(E):
+def decompose_essential(E: ArrayLike) -> list:
     """The four camera poses ``[R | t]`` compatible with E, camera 1 being ``[I | 0]`` (H&Z Result 9.19).
 
     With ``E = U diag(1, 1, 0) Vᵀ`` (U, V rotations) and ``W = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]``:
@@ -858,11 +883,41 @@ def _cheirality_counts(poses, y1, y2):
     return counts
 
 
-def pose_from_essential(E, x1, x2, K1, K2, return_counts=False):
+def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> list:
+    """How many correspondences each of the four poses of E puts in front of both cameras (H&Z Sec. 9.6.3).
+
+    Parameters
+    ----------
+    E : (3, 3) array_like
+    x1, x2 : (N, 2) array_like
+        Corresponding pixels.
+    K1, K2 : (3, 3) array_like
+
+    Returns
+    -------
+    list of 4 int
+        In the order of :func:`decompose_essential`; exactly one pose should win.
+
+    Examples
+    --------
+    >>> from labutils.synthetic import make_scene
+    >>> s = make_scene(20, 2, noise_px=0.0, rng=np.random.default_rng(0))
+    >>> x1, x2, _ = s.pair(0, 1, which="true")
+    >>> E = essential_from_fundamental(fundamental_8point(x1, x2), s.K, s.K)
+    >>> sorted(cheirality_counts(E, x1, x2, s.K, s.K))[-2:]
+    [0, 20]
+    """
+    x1, x2 = _check_pair(x1, x2, 1)
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
+    return _cheirality_counts(decompose_essential(E), _apply(np.linalg.inv(K1), x1), _apply(np.linalg.inv(K2), x2))
+
+
+def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
     """Relative pose of camera 2 (camera 1 = ``[I | 0]``) from E, chosen by cheirality (H&Z Sec. 9.6.3).
 
     Each of the four poses of :func:`decompose_essential` is used to triangulate the correspondences
-    (linear DLT on ``K⁻¹ x``); the pose that puts the most points in front of both cameras wins.
+    (linear DLT on ``K⁻¹ x``); the pose that puts the most points in front of both cameras wins
+    (:func:`cheirality_counts` gives the four counts).
 
     Parameters
     ----------
@@ -871,8 +926,6 @@ def pose_from_essential(E, x1, x2, K1, K2, return_counts=False):
     x1, x2 : (N, 2) array_like
         Corresponding pixels (inliers), N >= 1.
     K1, K2 : (3, 3) array_like
-    return_counts : bool
-        Also return the four counts of points in front (in the order of :func:`decompose_essential`).
 
     Returns
     -------
@@ -898,15 +951,9 @@ def pose_from_essential(E, x1, x2, K1, K2, return_counts=False):
     >>> bool(np.allclose(R, R_true) and np.allclose(t, t_true / np.linalg.norm(t_true)))
     True
     """
-    x1, x2 = _check_pair(x1, x2, 1)
-    K1, K2 = _calibration(K1, "K1"), _calibration(K2, "K2")
-    poses = decompose_essential(E)
-    y1 = _apply(np.linalg.inv(K1), x1)
-    y2 = _apply(np.linalg.inv(K2), x2)
-    counts = _cheirality_counts(poses, y1, y2)
+    counts = cheirality_counts(E, x1, x2, K1, K2)
     order = np.argsort(counts)[::-1]
     if counts[order[0]] == 0 or counts[order[0]] == counts[order[1]]:
         raise ValueError(f"cheirality cannot decide between the four poses (points in front: {counts}); "
                          "no baseline, or the correspondences do not fit E")
-    R, t = poses[order[0]]
-    return (R, t, counts) if return_counts else (R, t)
+    return decompose_essential(E)[order[0]]

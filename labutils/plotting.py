@@ -1,6 +1,8 @@
 """Plot helpers. Each takes an ``ax`` and returns it; none calls ``plt.show()`` or changes global style."""
 import numpy as np
 
+from .metrics import align_cameras
+
 
 def set_axes_equal(ax):
     """Give a 3D axis the same scale on x, y and z."""
@@ -111,8 +113,6 @@ def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, 
 def plot_pose_errors_topview(ax, R_true, t_true, R_est, t_est, magnify=50.0, axis_len=0.15):
     """Top view (x, y) of true cameras (black) and estimated ones after similarity alignment (red),
     with the errors of the centres and of the viewing directions magnified ``magnify`` times."""
-    from .metrics import align_cameras
-
     R_true, t_true = np.asarray(R_true, float), np.asarray(t_true, float)
     ok = np.all(np.isfinite(R_est), axis=(1, 2)) & np.all(np.isfinite(t_est), axis=1)
     R_al, t_al, _ = align_cameras(np.asarray(R_est)[ok], np.asarray(t_est)[ok], R_true[ok], t_true[ok])

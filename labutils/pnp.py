@@ -5,24 +5,20 @@ References: Persson & Nordberg, "Lambda Twist: An Accurate Fast Robust Perspecti
 Solver", ECCV 2018 (cited as LT); Hartley & Zisserman Sec. 7.1-7.2 (pose from known points) and
 Sec. 4.7 (RANSAC).
 """
+from dataclasses import dataclass, field
+
 import numpy as np
 import scipy.optimize
+from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, as_points
-from .geometry import rotation_from_angle_axis, skew
+from ._validation import as_calibration, as_count, as_matrix, as_points, as_positive, as_rng, as_rotation
+from .geometry import right_jacobian_so3, rotation_from_angle_axis
 from .ransac import ransac
 
 
 # --------------------------------------------------------------------------------------------- helpers
 
-def _check_K(K):
-    K = as_matrix(K, "K", (3, 3))
-    if abs(np.linalg.det(K)) <= 1e-12 * max(np.abs(K).max(), 1e-300) ** 3:
-        raise ValueError("K is singular: it is not a calibration matrix")
-    return K
-
-
-def bearings(x, K):
+def bearings(x: ArrayLike, K: ArrayLike) -> np.ndarray:
     """Unit viewing rays ``K⁻¹ [x; 1] / ‖·‖`` of pixels (all in front: positive z).
 
     Parameters
@@ -41,14 +37,17 @@ def bearings(x, K):
     array([[0., 0., 1.]])
     """
     x = as_points(x, "x")
-    K = _check_K(K)
+    K = as_calibration(K)
     r = np.linalg.solve(K, np.hstack([x, np.ones((len(x), 1))]).T).T
     r *= np.sign(r[:, 2:3])                     # K with K[2,2] < 0 would flip the rays
     return r / np.linalg.norm(r, axis=1, keepdims=True)
 
 
-def reprojection_errors(X, x, K, R, t):
-    """Pixel distance between ``x`` and the projection of ``X``; ``inf`` for points not in front.
+def reprojection_errors(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike) -> np.ndarray:
+    """Pixel distance between ``x`` and the projection of ``X`` by one camera; ``inf`` for points not in front.
+
+    (The multi-view version, for a whole reconstruction, is
+    :meth:`labutils.reconstruction.Reconstruction.reprojection_errors`.)
 
     Parameters
     ----------
@@ -64,10 +63,12 @@ def reprojection_errors(X, x, K, R, t):
     >>> reprojection_errors([[0., 0, 2], [0, 0, -2]], [[3., 4], [0, 0]], np.eye(3), np.eye(3), np.zeros(3))
     array([ 5., inf])
     """
-    X, x = np.asarray(X, float), np.asarray(x, float)
-    u = (X @ np.asarray(R, float).T + np.asarray(t, float).reshape(3)) @ np.asarray(K, float).T
+    X = as_points(X, "X", dim=3)
+    x = as_points(x, "x", like=X)
+    K, R, t = as_calibration(K), as_rotation(R), as_matrix(t, "t", (3,))
+    u = (X @ R.T + t) @ K.T
     z = u[:, 2]
-    front = (X @ np.asarray(R, float)[2] + np.asarray(t, float).reshape(3)[2]) > 0
+    front = (X @ R[2] + t[2]) > 0
     with np.errstate(divide="ignore", invalid="ignore"):
         e = np.linalg.norm(u[:, :2] / z[:, None] - x, axis=1)
     e[~front | ~np.isfinite(e)] = np.inf
@@ -115,7 +116,7 @@ def _refine_lambdas(lam, a, b, iters=5):
     return lam
 
 
-def p3p_bearings(X, y):
+def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     """All poses that map three world points onto three viewing rays: Lambda Twist P3P (LT Alg. 1).
 
     Unknown depths ``λᵢ > 0`` put the points at ``λᵢ yᵢ`` in the camera frame. Rigid motion keeps
@@ -248,7 +249,7 @@ def _quadratic_roots(A, B, C):
     return [r1, C / (A * r1)] if r1 != 0 else [r1, -B / A]
 
 
-def p3p(X, x, K):
+def p3p(X: ArrayLike, x: ArrayLike, K: ArrayLike) -> list:
     """Minimal pose from three 2D-3D correspondences: Lambda Twist P3P on pixels.
 
     Parameters
@@ -288,15 +289,6 @@ def p3p(X, x, K):
 
 
 # ------------------------------------------------------------------------------------------ refinement
-
-def _right_jacobian(w):
-    """Right Jacobian of SO(3): ``exp(w + δ) ≈ exp(w) exp(J_r(w) δ)``."""
-    th = np.linalg.norm(w)
-    W = skew(w)
-    if th < 1e-6:
-        return np.eye(3) - 0.5 * W + W @ W / 6.0
-    return np.eye(3) - (1 - np.cos(th)) / th ** 2 * W + (th - np.sin(th)) / th ** 3 * (W @ W)
-
 
 def pose_residuals(params, X, x, K, R0):
     """Reprojection residuals of the pose ``R = exp([w]×) R0``, ``t`` with ``params = (w, t)``.
@@ -345,12 +337,13 @@ def pose_jacobian(params, X, x, K, R0):
     S = np.zeros((len(X), 3, 3))                          # [RX]× for every point
     S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -RX[:, 2], RX[:, 1], -RX[:, 0]
     S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = RX[:, 2], -RX[:, 1], RX[:, 0]
-    dp_dw = -S @ (E @ _right_jacobian(w))                 # (N, 3, 3)
+    dp_dw = -S @ (E @ right_jacobian_so3(w))              # (N, 3, 3)
     J = np.concatenate([A @ dp_dw, A], axis=2)            # (N, 2, 6)
     return J.reshape(-1, 6)
 
 
-def refine_pose(X, x, K, R, t, loss="linear", f_scale=1.0, max_nfev=100):
+def refine_pose(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, *, loss: str = "linear",
+                f_scale: float = 1.0, max_nfev: int = 100) -> tuple:
     """Pose minimising the reprojection error (H&Z Sec. 7.2), over 6 parameters, with an analytic Jacobian.
 
     The rotation is updated as ``exp([w]×) R`` (an angle-axis increment, so no singularity at any
@@ -393,9 +386,11 @@ def refine_pose(X, x, K, R, t, loss="linear", f_scale=1.0, max_nfev=100):
     """
     X = as_points(X, "X", dim=3, min_n=3)
     x = as_points(x, "x", like=X)
-    K = _check_K(K)
-    R0 = as_matrix(R, "R", (3, 3))
-    t0 = as_matrix(np.asarray(t, float).reshape(-1), "t", (3,))
+    K = as_calibration(K)
+    R0 = as_rotation(R, "R")
+    t0 = as_matrix(t, "t", (3,))
+    f_scale = as_positive(f_scale, "f_scale")
+    max_nfev = as_count(max_nfev, "max_nfev", 1)
     if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
         raise ValueError(f"loss must be one of 'linear', 'soft_l1', 'huber', 'cauchy', 'arctan'; got {loss!r}")
     if _is_collinear(X):
@@ -403,7 +398,6 @@ def refine_pose(X, x, K, R, t, loss="linear", f_scale=1.0, max_nfev=100):
     behind = np.flatnonzero(X @ R0[2] + t0[2] <= 0)
     if behind.size:
         raise ValueError(f"{behind.size} of the {len(X)} points are behind the starting camera (rows {behind[:5].tolist()})")
-    K = K / K[2, 2]
     res = scipy.optimize.least_squares(
         pose_residuals, np.concatenate([np.zeros(3), t0]), jac=pose_jacobian, args=(X, x, K, R0),
         method="lm" if loss == "linear" else "trf", loss=loss, f_scale=f_scale, max_nfev=max_nfev,
@@ -415,14 +409,45 @@ def refine_pose(X, x, K, R, t, loss="linear", f_scale=1.0, max_nfev=100):
 
 # ------------------------------------------------------------------------------------------------ RANSAC
 
-def pnp_ransac(X, x, K, threshold=2.0, confidence=0.9999, rng=None, max_iter=10000, refine=True,
-               return_info=False):
+@dataclass
+class PnPResult:
+    """What :func:`pnp_ransac` returns.
+
+    Attributes
+    ----------
+    R : (3, 3) ndarray
+    t : (3,) ndarray
+        The pose, ``x_cam = R @ X + t``.
+    inliers : (N,) bool ndarray
+        Correspondences reprojecting within the threshold (after refinement, if any).
+    n_iter : int
+        RANSAC samples drawn.
+    n_refine : int
+        Refinement rounds.
+    ransac_inliers : (N,) bool ndarray
+        The inliers of the best RANSAC sample, before refinement.
+    """
+
+    R: np.ndarray
+    t: np.ndarray
+    inliers: np.ndarray = field(repr=False)
+    n_iter: int
+    n_refine: int
+    ransac_inliers: np.ndarray = field(repr=False)
+
+    @property
+    def n_inliers(self):
+        return int(self.inliers.sum())
+
+
+def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, threshold_px: float = 2.0,
+               confidence: float = 0.9999, max_iter: int = 10000, refine: bool = True) -> PnPResult:
     """Robust pose from 2D-3D correspondences: P3P in adaptive RANSAC, then refinement (H&Z Sec. 4.7, 7.2).
 
     Each minimal sample of 3 correspondences gives up to four P3P poses (:func:`p3p_bearings`);
     the generic loop (:func:`labutils.ransac.ransac`) scores every one by its inlier count, which also
     picks the right one of the four (no fourth point needed). A correspondence is an inlier when it
-    reprojects within ``threshold`` pixels and lies in front of the camera. The loop stops once a
+    reprojects within ``threshold_px`` pixels and lies in front of the camera. The loop stops once a
     sample free of outliers has been drawn with probability ``confidence`` (H&Z eq. 4.18). With
     ``refine`` the pose is then refined on the inliers (:func:`refine_pose`), the inliers are
     recomputed, and this is repeated until the set stops changing (at most 5 times).
@@ -435,23 +460,20 @@ def pnp_ransac(X, x, K, threshold=2.0, confidence=0.9999, rng=None, max_iter=100
         Their pixels (some may be wrong).
     K : (3, 3) array_like
         Calibration (skew allowed).
-    threshold : float
-        Inlier threshold on the reprojection error in pixels.
-    confidence : float
     rng : numpy.random.Generator
         Required.
+    threshold_px : float
+        Inlier threshold on the reprojection error in pixels.
+    confidence : float
+        In (0, 1).
     max_iter : int
         Most samples drawn.
     refine : bool
-    return_info : bool
-        Also return a dict with ``n_iter`` (samples), ``n_refine`` (refinement rounds), ``ransac_inliers``.
 
     Returns
     -------
-    R : (3, 3) ndarray
-    t : (3,) ndarray
-    inliers : (N,) bool ndarray
-    info : dict, only with ``return_info``
+    PnPResult
+        ``.R, .t, .inliers`` and how it got there.
 
     Raises
     ------
@@ -464,15 +486,15 @@ def pnp_ransac(X, x, K, threshold=2.0, confidence=0.9999, rng=None, max_iter=100
     >>> rng = np.random.default_rng(0); K = np.array([[800., 0, 320], [0, 800, 240], [0, 0, 1]])
     >>> X = rng.uniform(-1, 1, (30, 3)) + [0, 0, 6]; x = X @ K.T; x = x[:, :2] / x[:, 2:]
     >>> x[:5] = rng.uniform(0, 640, (5, 2))
-    >>> R, t, inliers = pnp_ransac(X, x, K, rng=rng)
-    >>> bool(np.allclose(R, np.eye(3), atol=1e-9)), int(inliers.sum()), bool(inliers[5:].all())
+    >>> res = pnp_ransac(X, x, K, rng=rng)
+    >>> bool(np.allclose(res.R, np.eye(3), atol=1e-9)), res.n_inliers, bool(res.inliers[5:].all())
     (True, 25, True)
     """
     X = as_points(X, "X", dim=3, min_n=4)
     x = as_points(x, "x", like=X, min_n=4)
-    K = _check_K(K)
-    if not threshold > 0:
-        raise ValueError(f"threshold must be positive (pixels); got {threshold}")
+    K = as_calibration(K)
+    as_rng(rng)
+    threshold_px = as_positive(threshold_px, "threshold_px")
     if _is_collinear(X):
         raise ValueError("all world points are collinear (or coincide): the pose is not determined")
     y = bearings(x, K)
@@ -486,7 +508,7 @@ def pnp_ransac(X, x, K, threshold=2.0, confidence=0.9999, rng=None, max_iter=100
     def errors(model):
         return reprojection_errors(X, x, K, *model)
 
-    (R, t), inliers, n_iter = ransac(len(X), 3, fit, errors, threshold, rng, confidence=confidence,
+    (R, t), inliers, n_iter = ransac(len(X), 3, fit, errors, threshold_px, rng=rng, confidence=confidence,
                                      max_iter=max_iter)
     ransac_inliers = inliers.copy()
     if inliers.sum() < 4:
@@ -496,10 +518,8 @@ def pnp_ransac(X, x, K, threshold=2.0, confidence=0.9999, rng=None, max_iter=100
     while refine and n_refine < 5:
         n_refine += 1
         R, t = refine_pose(X[inliers], x[inliers], K, R, t)
-        new = reprojection_errors(X, x, K, R, t) < threshold
+        new = reprojection_errors(X, x, K, R, t) < threshold_px
         if new.sum() < 4 or np.array_equal(new, inliers):
             break
         inliers = new
-    if return_info:
-        return R, t, inliers, dict(n_iter=n_iter, n_refine=n_refine, ransac_inliers=ransac_inliers)
-    return R, t, inliers
+    return PnPResult(R=R, t=t, inliers=inliers, n_iter=n_iter, n_refine=n_refine, ransac_inliers=ransac_inliers)

@@ -1,14 +1,23 @@
 """One generic adaptive RANSAC loop, reused by the fundamental matrix and by PnP (H&Z Sec. 4.7.1, Alg. 4.5)."""
+from collections.abc import Callable
+
 import numpy as np
 
+from ._validation import as_count, as_fraction, as_positive, as_probability_open, as_rng
 
-def ransac_iterations(inlier_ratio, sample_size, confidence):
+
+def ransac_iterations(inlier_ratio: float, sample_size: int, confidence: float) -> int:
     """Trials needed to draw one all-inlier sample with probability ``confidence`` (H&Z eq. 4.18).
 
     >>> ransac_iterations(0.5, 8, 0.99)
     1177
+    >>> ransac_iterations(0.5, 8, 1.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: confidence must be strictly between 0 and 1; got 1.0
     """
-    w = float(np.clip(inlier_ratio, 0.0, 1.0)) ** sample_size
+    w = as_fraction(inlier_ratio, "inlier_ratio", closed=True) ** as_count(sample_size, "sample_size", 1)
+    confidence = as_probability_open(confidence, "confidence")
     if w <= 0.0:
         return np.iinfo(np.int64).max
     if w >= 1.0:
@@ -16,7 +25,8 @@ def ransac_iterations(inlier_ratio, sample_size, confidence):
     return int(np.ceil(np.log(1 - confidence) / np.log1p(-w)))
 
 
-def ransac(n_data, sample_size, fit, errors, threshold, rng, confidence=0.999, max_iter=10000, min_iter=1):
+def ransac(n_data: int, sample_size: int, fit: Callable, errors: Callable, threshold: float, *,
+           rng: np.random.Generator, confidence: float = 0.999, max_iter: int = 10000, min_iter: int = 1) -> tuple:
     """Adaptive RANSAC: sample, fit, score by inlier count, stop when ``confidence`` is reached.
 
     Parameters
@@ -31,7 +41,7 @@ def ransac(n_data, sample_size, fit, errors, threshold, rng, confidence=0.999, m
     errors : callable
         ``errors(model)`` returns an ``(n_data,)`` array of errors (NaN or inf counts as an outlier).
     threshold : float
-        An item is an inlier when its error is below ``threshold``.
+        An item is an inlier when its error is below ``threshold`` (in the errors' unit: pixels for F and PnP).
     rng : numpy.random.Generator
     confidence : float
         Probability that at least one sample was all inliers when the loop stops.
@@ -50,8 +60,11 @@ def ransac(n_data, sample_size, fit, errors, threshold, rng, confidence=0.999, m
     ValueError
         Fewer data than ``sample_size``, no ``rng``, or no sample gave a model.
     """
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    as_rng(rng)
+    n_data, sample_size = as_count(n_data, "n_data", 0), as_count(sample_size, "sample_size", 1)
+    threshold = as_positive(threshold, "threshold")
+    confidence = as_probability_open(confidence, "confidence")
+    max_iter, min_iter = as_count(max_iter, "max_iter", 1), as_count(min_iter, "min_iter", 1)
     if n_data < sample_size:
         raise ValueError(f"RANSAC needs at least {sample_size} data items; got {n_data}")
     best, best_inliers, best_key = None, np.zeros(n_data, bool), (-1, -np.inf)

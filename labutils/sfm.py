@@ -25,213 +25,23 @@ The result is a :class:`Reconstruction`. Run it from the command line with
 ``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
 """
 import argparse
+import contextlib
 import json
-import os
 import sys
-import tempfile
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from . import _cli
+from ._validation import as_calibration, as_positive, as_rng, as_rotations, as_tracks
 from .bundle import bundle_adjust
-from .epipolar import essential_from_fundamental, fundamental_ransac, pose_from_essential
-from .metrics import align_cameras, apply_similarity, pose_errors
+from .formats import ply_text, read_calibration, read_tracks
+from .geometry import camera_center
 from .pnp import pnp_ransac
-from .triangulation import triangulate_multiview
-
-# ---------------------------------------------------------------------------------------------
-# The record
-# ---------------------------------------------------------------------------------------------
-
-
-@dataclass
-class Reconstruction:
-    """Cameras, points and the observations that support them, as built by :func:`incremental_sfm`.
-
-    Attributes
-    ----------
-    R : (V, 3, 3) ndarray
-        Rotations, ``x_cam = R[i] @ X + t[i]``; NaN for views that were not registered.
-    t : (V, 3) ndarray
-        Translations; NaN for views that were not registered.
-    registered : (V,) bool ndarray
-    X : (T, 3) ndarray
-        One world point per track; NaN for tracks that were not triangulated.
-    inliers : (V, T) bool ndarray
-        The observations the reconstruction uses (registered view, triangulated track, not rejected).
-    order : list of int
-        The views in the order they were added (the first two are the initial pair).
-    K : (V, 3, 3) ndarray
-        The calibration of each view.
-    timings : dict
-        Seconds spent per stage (``'total'`` included).
-    log : list of str
-        One line per step, for reading what happened.
-    """
-
-    R: np.ndarray
-    t: np.ndarray
-    registered: np.ndarray
-    X: np.ndarray
-    inliers: np.ndarray
-    order: list
-    K: np.ndarray
-    timings: dict = field(default_factory=dict)
-    log: list = field(default_factory=list, repr=False)
-
-    @property
-    def n_views(self):
-        return self.R.shape[0]
-
-    @property
-    def n_tracks(self):
-        return self.X.shape[0]
-
-    @property
-    def n_registered(self):
-        return int(self.registered.sum())
-
-    @property
-    def n_points(self):
-        """Triangulated tracks."""
-        return int(np.isfinite(self.X[:, 0]).sum())
-
-    @property
-    def n_observations(self):
-        return int(self.inliers.sum())
-
-    @property
-    def C(self):
-        """(V, 3) camera centres (NaN for unregistered views)."""
-        return -np.einsum("vji,vj->vi", self.R, self.t)
-
-    @property
-    def P(self):
-        """(V, 3, 4) camera matrices ``K @ [R | t]`` (NaN for unregistered views)."""
-        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
-
-    def reprojection_errors(self, tracks):
-        """(V, T) reprojection errors in pixels of the inlier observations of ``tracks`` (NaN elsewhere)."""
-        return reprojection_errors(self.K, self.R, self.t, self.X, tracks, self.inliers)
-
-    def summary(self):
-        """One line: what was reconstructed, and how long it took."""
-        secs = self.timings.get("total")
-        return (f"{self.n_registered} of {self.n_views} views registered, {self.n_points} of {self.n_tracks} "
-                f"tracks triangulated, {self.n_observations} observations"
-                + (f", {secs:.2f} s" if secs is not None else ""))
-
-    def to_dict(self):
-        """The result as plain JSON types (the format of the command line's RESULT.json).
-
-        ``cameras`` has one entry per view in input order, ``{"R": 3x3, "t": [3]}`` or ``None`` for a
-        view that was not registered; ``points`` lists ``{"track": index, "X": [3], "views": [...]}``
-        for each triangulated track (``views``: the views whose observation supports it); ``order`` is
-        the registration order. No timings: the same seed gives the same file.
-        """
-        cameras = [{"R": self.R[v].tolist(), "t": self.t[v].tolist()} if self.registered[v] else None
-                   for v in range(self.n_views)]
-        points = [{"track": int(k), "X": self.X[k].tolist(), "views": np.flatnonzero(self.inliers[:, k]).tolist()}
-                  for k in np.flatnonzero(np.isfinite(self.X[:, 0]))]
-        return {"cameras": cameras, "points": points, "order": [int(v) for v in self.order]}
-
-    def to_json(self, path):
-        """Write :meth:`to_dict` to ``path`` (JSON)."""
-        Path(path).write_text(json.dumps(self.to_dict()) + "\n")
-
-    def to_ply(self, path):
-        """Write the triangulated points to ``path`` as an ASCII PLY point cloud."""
-        Path(path).write_text(ply_text(self.X[np.isfinite(self.X[:, 0])]))
-
-
-def ply_text(X):
-    """An ASCII PLY file (as a string) holding the points ``X`` (N, 3).
-
-    >>> print(ply_text(np.array([[1.0, 2.0, 3.5]])), end="")
-    ply
-    format ascii 1.0
-    comment written by labutils.sfm
-    element vertex 1
-    property double x
-    property double y
-    property double z
-    end_header
-    1.0 2.0 3.5
-    """
-    X = np.asarray(X, float).reshape(-1, 3)
-    head = ["ply", "format ascii 1.0", "comment written by labutils.sfm", f"element vertex {len(X)}",
-            "property double x", "property double y", "property double z", "end_header"]
-    return "\n".join(head + [" ".join(repr(float(c)) for c in p) for p in X]) + "\n"
-
-
-def read_result_json(path):
-    """Read a RESULT.json written by :meth:`Reconstruction.to_json` back into arrays.
-
-    Returns
-    -------
-    R : (V, 3, 3) ndarray
-    t : (V, 3) ndarray
-        NaN for views that were not registered.
-    X : (T', 3) ndarray
-        The points, in the file's order.
-    track : (T',) int ndarray
-        Their track (row) indices.
-    """
-    d = json.loads(Path(path).read_text())
-    V = len(d["cameras"])
-    R, t = np.full((V, 3, 3), np.nan), np.full((V, 3), np.nan)
-    for v, cam in enumerate(d["cameras"]):
-        if cam is not None:
-            R[v], t[v] = cam["R"], cam["t"]
-    X = np.array([p["X"] for p in d["points"]], float).reshape(-1, 3)
-    track = np.array([p["track"] for p in d["points"]], int)
-    return R, t, X, track
-
-
-# ---------------------------------------------------------------------------------------------
-# Input checks and small geometric helpers
-# ---------------------------------------------------------------------------------------------
-
-
-def _as_tracks(tracks):
-    try:
-        x = np.array(tracks, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"tracks must be a numeric array of shape (V, T, 2): {exc}") from None
-    if x.ndim != 3 or x.shape[2] != 2:
-        raise ValueError(f"tracks must have shape (V, T, 2) (views, tracks, pixel), NaN where unseen; got {x.shape}")
-    if x.shape[0] < 2 or x.shape[1] < 1:
-        raise ValueError(f"tracks needs at least 2 views and 1 track; got shape {x.shape}")
-    if np.isinf(x).any():
-        raise ValueError("tracks has infinite coordinates; mark an unseen observation with NaN")
-    if np.any(np.isnan(x[..., 0]) != np.isnan(x[..., 1])):
-        v, k = np.argwhere(np.isnan(x[..., 0]) != np.isnan(x[..., 1]))[0]
-        raise ValueError(f"tracks[{v}, {k}] has one NaN coordinate: an unseen observation is NaN in both")
-    return x
-
-
-def _as_calibrations(K, n_views):
-    try:
-        K = np.array(K, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"K must be a numeric array of shape (3, 3) or (V, 3, 3): {exc}") from None
-    if K.shape == (3, 3):
-        K = np.repeat(K[None], n_views, axis=0)
-    if K.shape != (n_views, 3, 3):
-        raise ValueError(f"K must have shape (3, 3) (shared) or ({n_views}, 3, 3) (one per view); got {K.shape}")
-    if not np.all(np.isfinite(K)):
-        raise ValueError("K has non-finite entries (NaN or inf)")
-    scale = np.abs(K).max(axis=(1, 2))
-    bad = np.flatnonzero((np.abs(K[:, 2, :2]) > 1e-12 * scale[:, None]).any(1) | (K[:, 2, 2] == 0))
-    if bad.size:
-        raise ValueError(f"K of view {bad[0]} is not a calibration matrix: its last row must be (0, 0, k), k != 0")
-    K = K / K[:, 2:, 2:]
-    bad = np.flatnonzero(np.abs(np.linalg.det(K)) <= 1e-12 * np.abs(K).max(axis=(1, 2)) ** 3)
-    if bad.size:
-        raise ValueError(f"K of view {bad[0]} is singular: a calibration matrix must be invertible")
-    return K
+from .reconstruction import Reconstruction, masked_reprojection_errors
+from .triangulation import ray_angles_deg, triangulate_tracks
+from .twoview import two_view_reconstruction
 
 
 def covisibility(tracks):
@@ -247,284 +57,7 @@ def covisibility(tracks):
     return seen @ seen.T
 
 
-def reprojection_errors(K, R, t, X, tracks, mask):
-    """Reprojection errors in pixels, ``‖x - π(K (R X + t))‖``, of the observations in ``mask``.
-
-    Parameters
-    ----------
-    K : (V, 3, 3) array_like
-    R : (V, 3, 3) array_like
-    t : (V, 3) array_like
-    X : (T, 3) array_like
-    tracks : (V, T, 2) array_like
-    mask : (V, T) bool array_like
-        The observations to evaluate.
-
-    Returns
-    -------
-    err : (V, T) ndarray
-        NaN outside ``mask``; ``inf`` where the point is not in front of the camera (cheirality).
-
-    >>> K = np.eye(3)[None]; R = np.eye(3)[None]; t = np.zeros((1, 3))
-    >>> reprojection_errors(K, R, t, [[0.3, 0.4, 1.0], [0, 0, -1]], [[[0.0, 0.0], [0.0, 0.0]]], [[True, True]])
-    array([[0.5, inf]])
-    """
-    K, R, t, X = (np.asarray(a, float) for a in (K, R, t, X))
-    tracks, mask = np.asarray(tracks, float), np.asarray(mask, bool)
-    err = np.full(mask.shape, np.nan)
-    cam, pt = np.nonzero(mask)
-    c = np.einsum("nij,nj->ni", R[cam], X[pt]) + t[cam]
-    q = np.einsum("nij,nj->ni", K[cam], c)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.linalg.norm(q[:, :2] / q[:, 2:] - tracks[cam, pt], axis=1)
-    e[~(c[:, 2] > 0)] = np.inf
-    err[cam, pt] = e
-    return err
-
-
-def ray_angles_deg(C, X, mask):
-    """Triangulation angle of each point: the largest angle between two of its viewing rays (degrees).
-
-    Parameters
-    ----------
-    C : (V, 3) array_like
-        Camera centres.
-    X : (T, 3) array_like
-        Points.
-    mask : (V, T) bool array_like
-        Which views observe which point.
-
-    Returns
-    -------
-    angle : (T,) ndarray
-        NaN for points with fewer than two observations.
-
-    >>> C = [[0, 0, 0], [1, 0, 0], [2, 0, 0]]
-    >>> np.round(ray_angles_deg(C, [[1, 0, 1], [1, 0, 1]], [[1, 1], [0, 1], [1, 0]]), 6)
-    array([90., 45.])
-    """
-    C, X, mask = np.asarray(C, float), np.asarray(X, float), np.asarray(mask, bool)
-    n = mask.sum(0)
-    angle = np.full(X.shape[0], np.nan)
-    order = np.argsort(~mask, axis=0, kind="stable")                      # observing views first
-    for L in np.unique(n[n >= 2]):                                         # tracks grouped by length
-        cols = np.flatnonzero(n == L)
-        rays = X[cols][None] - C[order[:L, cols]]                          # (L, m, 3)
-        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-        cos = np.einsum("imk,jmk->mij", rays, rays).min(axis=(1, 2))
-        angle[cols] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    return angle
-
-
-def _camera_matrices(K, R, t, views):
-    return np.einsum("vij,vjk->vik", K[views], np.concatenate([R[views], t[views, :, None]], axis=2))
-
-
-def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_deg):
-    """Robust triangulation of tracks from registered views (H&Z Sec. 12.2; the idea of COLMAP's RANSAC
-    triangulation, with every pair of views tried).
-
-    For each track, every pair of its observations is triangulated (midpoint of the two rays) and scored
-    by how many of the track's observations then reproject within ``max_error_px`` in front of the camera
-    (the consensus). The observations on which all the largest consensus sets agree are triangulated by
-    multi-view DLT and the consensus taken again (twice); a track whose largest consensus sets share fewer
-    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected. Then, while some kept observation reprojects
-    too far, the worst one is dropped and the track triangulated again. A point is accepted when at least
-    two observations remain and its triangulation angle is at least ``min_angle_deg``. Trying all pairs
-    makes the result depend on the cameras only, not on the order in which views were added.
-
-    Parameters
-    ----------
-    tracks : (V, N, 2) array_like
-        Pixels, NaN where unseen (the columns are the tracks to triangulate).
-    K, R : (V, 3, 3) array_like
-    t : (V, 3) array_like
-        Calibration and poses (used only for ``views``).
-    views : (m,) int array_like
-        The registered views to use.
-    mask : (V, N) bool array_like
-        Observations allowed (outside ``views`` they are ignored).
-    max_error_px, min_angle_deg : float
-
-    Returns
-    -------
-    X : (N, 3) ndarray
-        NaN where the track was rejected.
-    used : (V, N) bool ndarray
-        The observations that support each accepted point (all False for a rejected one).
-
-    Examples
-    --------
-    >>> from labutils.synthetic import make_scene
-    >>> s = make_scene(20, 3, noise_px=0.0, rng=np.random.default_rng(0))
-    >>> x = s.x_true.copy(); x[2, 0] += 50                     # one gross outlier
-    >>> X, used = triangulate_tracks(x, np.stack([s.K] * 3), s.R, s.t, [0, 1, 2], s.visible,
-    ...                              max_error_px=1.0, min_angle_deg=1.0)
-    >>> bool(np.allclose(X, s.X)), int(used.sum()), bool(used[2, 0])
-    (True, 59, False)
-    """
-    tracks = np.asarray(tracks, float)
-    K, R, t = np.asarray(K, float), np.asarray(R, float), np.asarray(t, float)
-    views = np.asarray(views, int)
-    V, N = tracks.shape[:2]
-    use = np.zeros((V, N), bool)
-    use[views] = np.asarray(mask, bool)[views] & np.all(np.isfinite(tracks[views]), axis=-1)
-    X = np.full((N, 3), np.nan)
-    if N == 0 or views.size < 2:
-        return X, np.zeros((V, N), bool)
-    Ps = np.zeros((V, 3, 4))
-    Ps[views] = _camera_matrices(K / K[:, 2:, 2:], R, t, views)     # K33 > 0: q_z has the sign of the depth
-    xs = np.where(use[..., None], tracks, 0.0)
-
-    def errors(Xq, cam, col):
-        """Reprojection errors of points ``Xq`` (n, 3) in views ``cam`` against ``xs[cam, col]``; inf behind."""
-        q = np.einsum("nij,nj->ni", Ps[cam], np.hstack([Xq, np.ones((len(Xq), 1))]))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            e = np.linalg.norm(q[:, :2] / q[:, 2:] - xs[cam, col], axis=1)
-        e[~(q[:, 2] > 0)] = np.inf
-        return e
-
-    # 1. every pair of observations of every track, and its consensus in the whole track
-    cand = np.flatnonzero(use.sum(0) >= 2)
-    if cand.size == 0:
-        return X, np.zeros((V, N), bool)
-    n_obs = use[:, cand].sum(0)
-    L = int(n_obs.max())
-    vid = np.argsort(~use[:, cand], axis=0, kind="stable")[:L]           # (L, n): observing views first
-    a, b = np.triu_indices(L, 1)
-    pa, col = np.nonzero(b[:, None] < n_obs[None])                         # all pairs of each track
-    va, vb, trk = vid[a[pa], col], vid[b[pa], col], cand[col]
-    # the midpoint of the two viewing rays (H&Z Sec. 12.1): cheap, and only used to find the consensus
-    Kinv = np.zeros((V, 3, 3))
-    Kinv[views] = np.linalg.inv(K[views])
-    C = np.zeros((V, 3))
-    C[views] = -np.einsum("vji,vj->vi", R[views], t[views])
-    Rt = np.swapaxes(np.where(use.any(1)[:, None, None], R, 0.0), 1, 2)
-    xh = np.concatenate([xs, np.ones((V, N, 1))], axis=2)
-    da = np.einsum("nij,nj->ni", Rt[va] @ Kinv[va], xh[va, trk])
-    db = np.einsum("nij,nj->ni", Rt[vb] @ Kinv[vb], xh[vb, trk])
-    w0 = C[va] - C[vb]
-    aa, ab, bb = (da * da).sum(1), (da * db).sum(1), (db * db).sum(1)
-    d, e = (da * w0).sum(1), (db * w0).sum(1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        den = aa * bb - ab ** 2
-        sa, sb = (ab * e - bb * d) / den, (aa * e - ab * d) / den
-        Xp = 0.5 * (C[va] + sa[:, None] * da + C[vb] + sb[:, None] * db)
-    Xp[~(np.abs(den) > 1e-12 * aa * bb) | ~np.all(np.isfinite(Xp), axis=1)] = np.inf
-    # each pair's point against every observation of its track
-    n_po = n_obs[col]
-    pair_of = np.repeat(np.arange(col.size), n_po)
-    slot = np.arange(pair_of.size) - np.repeat(np.cumsum(n_po) - n_po, n_po)
-    cam = vid[slot, col[pair_of]]
-    e = errors(np.nan_to_num(Xp[pair_of], posinf=0.0), cam, trk[pair_of])
-    e[~np.isfinite(Xp[pair_of, 0])] = np.inf
-    inl = np.isfinite(e) & (e <= max_error_px)                            # inf: behind a camera
-    count = np.bincount(pair_of, inl, col.size)
-    most = np.zeros(N)
-    np.maximum.at(most, trk, count)
-    top = count == most[trk]                                               # the pairs with the largest consensus
-    # the observations on which all the largest consensus sets agree (an ambiguous track keeps < 2)
-    n_top = np.bincount(trk[top], minlength=N)
-    votes = np.zeros((V, N), int)
-    w = top[pair_of] & inl
-    np.add.at(votes, (cam[w], trk[pair_of[w]]), 1)
-    cons = (votes == n_top[None]) & (votes > 0)
-    # 2. refit on the consensus set and take the consensus again
-    for _ in range(2):
-        todo = np.flatnonzero(cons.sum(0) >= 2)
-        X[todo] = triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan))
-        cam, pt = np.nonzero(use[:, todo])
-        cons[:, todo] = False
-        e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
-        cons[cam, todo[pt]] = np.isfinite(e) & (e <= max_error_px)
-    use &= cons
-    # 3. drop the worst observation while one reprojects too far
-    todo = np.flatnonzero(use.sum(0) >= 2)
-    while todo.size:
-        X[todo] = triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan))
-        cam, pt = np.nonzero(use[:, todo])
-        err = np.full((V, todo.size), -1.0)
-        err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
-        worst = np.argmax(err, axis=0)
-        e = err[worst, np.arange(todo.size)]
-        bad = np.isinf(e) | (e > max_error_px)
-        use[worst[bad], todo[bad]] = False
-        todo = todo[bad & (use[:, todo].sum(0) >= 2)]
-    ok = use.sum(0) >= 2
-    angle = ray_angles_deg(C, np.where(ok[:, None], np.nan_to_num(X), 0.0), use & ok)
-    ok &= angle >= min_angle_deg
-    X[~ok] = np.nan
-    use[:, ~ok] = False
-    return X, use
-
-
-# ---------------------------------------------------------------------------------------------
-# Initial pair and next view
-# ---------------------------------------------------------------------------------------------
-
-
-def two_view_reconstruction(x1, x2, K1, K2, rng, *, threshold_px=4.0, confidence=0.999, min_angle_deg=1.0,
-                            refine=True, loss="cauchy", f_scale=1.0):
-    """Relative pose and points from two views, as in the two-view notebooks (H&Z Sec. 9.6, 11.6, 12.2, 18.1).
-
-    F by RANSAC (Sampson distance below ``threshold_px``), ``E = K2ᵀ F K1``, the pose of the four
-    decompositions that puts the points in front of both cameras, then DLT triangulation. A point is kept
-    when it is an F inlier, in front of both cameras, reprojects within ``threshold_px`` in both views and
-    is seen under at least ``min_angle_deg``. With ``refine`` the pose and the points are then
-    bundle-adjusted (camera 1 and the baseline length held) and every correspondence is triangulated
-    again with the refined pose: F ignores the calibration, and from a narrow field of view (the
-    dinosaur's) its translation direction can be off by tens of degrees, which the calibrated BA repairs.
-
-    Parameters
-    ----------
-    x1, x2 : (N, 2) array_like
-        Corresponding pixels, N >= 8.
-    K1, K2 : (3, 3) array_like
-    rng : numpy.random.Generator
-    refine : bool
-    loss, f_scale : str, float
-        Loss of the refinement (see :func:`labutils.bundle.bundle_adjust`).
-
-    Returns
-    -------
-    R : (3, 3) ndarray
-    t : (3,) ndarray
-        Camera 2 ``[R | t]`` with camera 1 ``[I | 0]`` and ``‖t‖ = 1``.
-    X : (N, 3) ndarray
-        NaN for the rejected correspondences.
-    median_angle : float
-        Median triangulation angle (degrees) of the kept points (0 when none is kept).
-    """
-    x1 = np.asarray(x1, float)
-    x2 = np.asarray(x2, float)
-    K1, K2 = np.asarray(K1, float), np.asarray(K2, float)
-    F, inl = fundamental_ransac(x1, x2, threshold=threshold_px, rng=rng, confidence=confidence)
-    inl = np.asarray(inl, bool)
-    E = essential_from_fundamental(F, K1, K2)
-    R, t = pose_from_essential(E, x1[inl], x2[inl], K1, K2)
-    Ks = np.stack([K1, K2])
-    Rs, ts = np.stack([np.eye(3), R]), np.stack([np.zeros(3), np.asarray(t, float).reshape(3)])
-    xs = np.stack([x1, x2])
-    mask = np.tile(inl, (2, 1))
-    # E is F projected onto the essential matrices: when F is poorly conditioned the pose is rough and the
-    # reprojection errors large, so before the refinement a point only has to be in front of both cameras
-    X, used = triangulate_tracks(xs, Ks, Rs, ts, [0, 1], mask, max_error_px=np.inf if refine else threshold_px,
-                                 min_angle_deg=min_angle_deg)
-    ok = np.isfinite(X[:, 0])
-    if refine and ok.sum() >= 8:
-        ci, pi = np.nonzero(used[:, ok])
-        res = bundle_adjust(Rs, ts, X[ok], ci, pi, xs[ci, np.flatnonzero(ok)[pi]], Ks, loss=loss, f_scale=f_scale,
-                            fixed_cameras=[0], max_iter=30, tol=1e-6)     # a repair, not the last word
-        s = np.linalg.norm(res.t[1])                              # keep ‖t‖ = 1 exactly
-        Rs, ts = np.stack([np.eye(3), res.R[1]]), np.stack([np.zeros(3), res.t[1] / s])
-        X, used = triangulate_tracks(xs, Ks, Rs, ts, [0, 1], np.ones_like(mask), max_error_px=threshold_px,
-                                     min_angle_deg=min_angle_deg)
-        ok = np.isfinite(X[:, 0])
-    angle = ray_angles_deg(-np.einsum("vji,vj->vi", Rs, ts), np.where(ok[:, None], X, 0), used)
-    return Rs[1], ts[1], X, float(np.median(angle[ok])) if ok.any() else 0.0
-
-
-def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_angle_deg=3.0, threshold_px=4.0,
+def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, n_candidates=6, min_tracks=30, min_angle_deg=3.0, threshold_px=4.0,
                         confidence=0.999):
     """Pick the initial pair: many shared tracks and a wide enough baseline.
 
@@ -555,8 +88,8 @@ def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_an
     ValueError
         If no pair of views shares ``min_tracks`` tracks.
     """
-    tracks = _as_tracks(tracks)
-    Ks = _as_calibrations(K, tracks.shape[0])
+    tracks = as_tracks(tracks, min_views=2)
+    Ks = as_calibration(K, "K", n_views=tracks.shape[0])
     cov = covisibility(tracks)
     i, j = np.triu_indices(len(cov), 1)
     keep = cov[i, j] >= max(min_tracks, 8)
@@ -569,7 +102,7 @@ def choose_initial_pair(tracks, K, rng, *, n_candidates=6, min_tracks=30, min_an
     for a, b in zip(i[order], j[order]):
         x1, x2, idx = _pair(tracks, a, b)
         try:
-            R, t, X, med = two_view_reconstruction(x1, x2, Ks[a], Ks[b], rng, threshold_px=threshold_px,
+            R, t, X, med = two_view_reconstruction(x1, x2, Ks[a], Ks[b], rng=rng, threshold_px=threshold_px,
                                                    confidence=confidence)
         except ValueError as exc:          # e.g. no baseline: no pose puts the points in front
             table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=0, median_angle=0.0, failed=str(exc)))
@@ -654,7 +187,7 @@ class _State:
         return (self.seen & ~self.rejected & self.triangulated[None]).sum(1)
 
     def centres(self):
-        return -np.einsum("vji,vj->vi", np.where(self.reg[:, None, None], self.R, 0), np.where(self.reg[:, None], self.t, 0))
+        return camera_center(np.where(self.reg[:, None, None], self.R, np.eye(3)), np.where(self.reg[:, None], self.t, 0))
 
 
 def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter, tol=1e-8):
@@ -690,7 +223,7 @@ def _filter(st, threshold_px, min_angle_deg, readmit=False):
     if readmit:
         st.rejected[:] = False
     cand = st.used()
-    err = reprojection_errors(st.K, st.R, st.t, st.X, st.tracks, cand)
+    err = masked_reprojection_errors(st.K, st.R, st.t, st.X, st.tracks, cand)
     bad = cand & ~(err <= threshold_px)
     st.rejected |= bad
     used = st.used()
@@ -708,7 +241,7 @@ def _triangulate_new(st, candidates, threshold_px, min_angle_deg):
     views = np.flatnonzero(st.reg)
     allowed = st.seen[:, cand] & ~st.rejected[:, cand]
     X, used = triangulate_tracks(st.tracks[:, cand], st.K, st.R, st.t, views, allowed,
-                                 max_error_px=threshold_px, min_angle_deg=min_angle_deg)
+                                 threshold_px=threshold_px, min_angle_deg=min_angle_deg)
     ok = np.isfinite(X[:, 0])
     st.X[cand[ok]] = X[ok]
     # observations dropped while triangulating an accepted point are outliers of that point
@@ -755,7 +288,7 @@ def _result(st, order, timings, log):
                           timings=dict(timings), log=list(log))
 
 
-def incremental_sfm(tracks, K, rng, *, init_pair=None, threshold_px=4.0, min_angle_deg=1.5, init_min_angle_deg=3.0,
+def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, init_pair=None, threshold_px=4.0, min_angle_deg=1.5, init_min_angle_deg=3.0,
                     n_init_candidates=6, min_inliers=15, local_ba_views=4, global_ba_growth=1.4, loss="cauchy",
                     f_scale=1.0, ba_max_iter=5, final_max_iter=100, confidence=0.9999, verbose=False):
     """Incremental structure from motion from calibrated tracks (module docstring; H&Z Ch. 18).
@@ -806,18 +339,17 @@ def incremental_sfm(tracks, K, rng, *, init_pair=None, threshold_px=4.0, min_ang
     --------
     >>> from labutils.synthetic import make_scene
     >>> s = make_scene(200, 12, layout="turntable", noise_px=0.0, rng=np.random.default_rng(1))
-    >>> rec = incremental_sfm(s.tracks, s.K, np.random.default_rng(0))
+    >>> rec = incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(0))
     >>> rec.n_registered, rec.R.shape, rec.X.shape, rec.n_points == s.n_points
     (12, (12, 3, 3), (186, 3), True)
     """
     t_start = time.perf_counter()
-    tracks = _as_tracks(tracks)
+    tracks = as_tracks(tracks, min_views=2)
     V, T = tracks.shape[:2]
-    Ks = _as_calibrations(K, V)
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
-    if not threshold_px > 0:
-        raise ValueError(f"threshold_px must be positive; got {threshold_px}")
+    Ks = as_calibration(K, "K", n_views=V)
+    as_rng(rng)
+    threshold_px = as_positive(threshold_px, "threshold_px")
+    min_angle_deg = as_positive(min_angle_deg, "min_angle_deg", allow_zero=True)
     st = _State(tracks, Ks)
     timings = {k: 0.0 for k in ("initial_pair", "pnp", "triangulation", "local_ba", "global_ba")}
     log = []
@@ -831,7 +363,7 @@ def incremental_sfm(tracks, K, rng, *, init_pair=None, threshold_px=4.0, min_ang
     # 1. the initial pair
     t0 = time.perf_counter()
     if init_pair is None:
-        best, table = choose_initial_pair(tracks, Ks, rng, n_candidates=n_init_candidates, min_angle_deg=init_min_angle_deg,
+        best, table = choose_initial_pair(tracks, Ks, rng=rng, n_candidates=n_init_candidates, min_angle_deg=init_min_angle_deg,
                                           threshold_px=threshold_px, confidence=confidence)
     else:
         i, j = (int(v) for v in init_pair)
@@ -840,7 +372,7 @@ def incremental_sfm(tracks, K, rng, *, init_pair=None, threshold_px=4.0, min_ang
         x1, x2, idx = _pair(tracks, i, j)
         if len(idx) < 8:
             raise ValueError(f"views {i} and {j} share {len(idx)} tracks; at least 8 are needed to start")
-        R, t, X, med = two_view_reconstruction(x1, x2, Ks[i], Ks[j], rng, threshold_px=threshold_px, confidence=confidence)
+        R, t, X, med = two_view_reconstruction(x1, x2, Ks[i], Ks[j], rng=rng, threshold_px=threshold_px, confidence=confidence)
         ok = np.isfinite(X[:, 0])
         best = dict(i=i, j=j, R=R, t=t, track=idx[ok], X=X[ok], median_angle=med)
     i, j = best["i"], best["j"]
@@ -865,8 +397,9 @@ def incremental_sfm(tracks, K, rng, *, init_pair=None, threshold_px=4.0, min_ang
         t0 = time.perf_counter()
         idx = np.flatnonzero(st.seen[v] & ~st.rejected[v] & st.triangulated)
         try:
-            R, t, inl = pnp_ransac(st.X[idx], tracks[v, idx], Ks[v], threshold=threshold_px, confidence=confidence,
-                                   rng=rng, refine=True)
+            pose = pnp_ransac(st.X[idx], tracks[v, idx], Ks[v], threshold_px=threshold_px, confidence=confidence,
+                              rng=rng, refine=True)
+            R, t, inl = pose.R, pose.t, pose.inliers
             inl = np.asarray(inl, bool)
             ok = inl.sum() >= min_inliers
         except ValueError as exc:
@@ -954,236 +487,70 @@ def bundle_from_cameras(tracks, K, R, t, *, threshold_px=4.0, min_angle_deg=1.5,
         ``order`` is empty (nothing was registered incrementally).
     """
     t_start = time.perf_counter()
-    tracks = _as_tracks(tracks)
+    tracks = as_tracks(tracks, min_views=2)
     V = tracks.shape[0]
-    Ks = _as_calibrations(K, V)
+    Ks = as_calibration(K, "K", n_views=V)
     R, t = np.array(R, float), np.array(t, float)
     if R.shape != (V, 3, 3) or t.shape != (V, 3):
-        raise ValueError(f"R and t must have shapes ({V}, 3, 3) and ({V}, 3); got {R.shape} and {t.shape}")
+        raise ValueError(f"R and t must have shapes ({V}, 3, 3) and ({V}, 3) (NaN rows for cameras to leave out); "
+                         f"got {R.shape} and {t.shape}" + (" — t transposed?" if t.shape == (3, V) else ""))
+    threshold_px = as_positive(threshold_px, "threshold_px")
     st = _State(tracks, Ks)
     st.reg = np.isfinite(R).all((1, 2)) & np.isfinite(t).all(1)
     if st.reg.sum() < 2:
         raise ValueError("need at least two cameras with finite R and t")
-    st.R[st.reg], st.t[st.reg] = R[st.reg], t[st.reg]
+    st.R[st.reg] = as_rotations(R[st.reg], "R")
+    st.t[st.reg] = t[st.reg]
     log, timings = [], {}
     _final_refinement(st, threshold_px=threshold_px, min_angle_deg=min_angle_deg, loss=loss, f_scale=f_scale,
                       max_iter=max_iter, note=log.append, timings=timings)
+    if not st.triangulated.any():
+        raise ValueError("no track could be triangulated from the given cameras: they share one centre (no "
+                         "baseline), or put the points behind them (a mirrored frame?), or do not fit the tracks")
     timings["total"] = time.perf_counter() - t_start
     return _result(st, [], timings, log)
 
 
-# ---------------------------------------------------------------------------------------------
-# Evaluation
-# ---------------------------------------------------------------------------------------------
-
-
-def camera_errors(rec, R_true, t_true):
-    """Per-camera errors against reference poses, after a similarity alignment of the centres (Umeyama).
-
-    Parameters
-    ----------
-    rec : Reconstruction
-    R_true : (V, 3, 3) array_like
-    t_true : (V, 3) array_like
-
-    Returns
-    -------
-    rot_deg : (V,) ndarray
-        Rotation error in degrees (NaN for views that were not registered).
-    centre_rel : (V,) ndarray
-        Centre error divided by the scene size (RMS distance of the reference centres from their mean).
-    """
-    reg = np.asarray(rec.registered, bool)
-    if reg.sum() < 3:
-        raise ValueError(f"need at least 3 registered views to align; got {reg.sum()}")
-    rot, cen = np.full(reg.shape, np.nan), np.full(reg.shape, np.nan)
-    rot[reg], cen[reg] = pose_errors(rec.R[reg], rec.t[reg], np.asarray(R_true, float)[reg],
-                                     np.asarray(t_true, float)[reg])
-    return rot, cen
-
-
-def align_reconstruction(rec, R_true, t_true):
-    """The reconstruction moved into the frame (and scale) of reference poses, for plotting.
-
-    Returns
-    -------
-    R : (V, 3, 3) ndarray
-    t : (V, 3) ndarray
-    X : (T, 3) ndarray
-        Poses and points after the similarity that best maps the registered centres onto the reference.
-    """
-    reg = np.asarray(rec.registered, bool)
-    R, t = np.full_like(rec.R, np.nan), np.full_like(rec.t, np.nan)
-    R[reg], t[reg], sim = align_cameras(rec.R[reg], rec.t[reg], np.asarray(R_true, float)[reg],
-                                        np.asarray(t_true, float)[reg])
-    return R, t, apply_similarity(sim, rec.X)
-
-
-# ---------------------------------------------------------------------------------------------
-# Files and the command line
-# ---------------------------------------------------------------------------------------------
-
-
-def _numeric_rows(path, what):
-    """(line number, list of floats) for each non-blank line of ``path`` ('#' starts a comment)."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read the {what} file ({exc})") from None
-    rows = []
-    for lineno, line in enumerate(text.splitlines(), 1):
-        tokens = line.split("#", 1)[0].split()
-        if not tokens:
-            continue
-        vals = []
-        for col, tok in enumerate(tokens, 1):
-            try:
-                val = float(tok)
-            except ValueError:
-                raise ValueError(f"{path}, line {lineno}, column {col}: {tok!r} is not a number") from None
-            if not np.isfinite(val):
-                raise ValueError(f"{path}, line {lineno}, column {col}: {tok!r} is not a finite number")
-            vals.append(val)
-        rows.append((lineno, vals))
-    if not rows:
-        raise ValueError(f"{path}: the {what} file holds no numbers")
-    return rows
-
-
-def read_tracks(path):
-    """Read a VGG track file: one row per track, ``x y`` for each view, ``-1 -1`` where unseen.
-
-    (The format of the dinosaur's ``viff`` array, 4,983 rows × 72 columns.) Blank lines and text after
-    ``#`` are ignored.
-
-    Returns
-    -------
-    tracks : (V, T, 2) ndarray
-        NaN where unseen, like ``Scene.tracks``.
-
-    Raises
-    ------
-    ValueError
-        Naming the file and line: a non-numeric or non-finite entry, an odd number of columns, a row
-        whose length differs from the first, fewer than 2 views, or a half-missing observation.
-    """
-    rows = _numeric_rows(path, "tracks")
-    first, n = rows[0][0], len(rows[0][1])
-    if n % 2:
-        raise ValueError(f"{path}, line {first}: {n} numbers, an odd count; a track row holds an x y pair per view")
-    if n < 4:
-        raise ValueError(f"{path}, line {first}: {n} numbers = {n // 2} view; at least 2 views (4 columns) are needed")
-    for lineno, vals in rows:
-        if len(vals) != n:
-            raise ValueError(f"{path}, line {lineno}: {len(vals)} numbers, but line {first} has {n} "
-                             f"(an x y pair for each of {n // 2} views)")
-    a = np.array([vals for _, vals in rows]).reshape(len(rows), n // 2, 2)
-    miss = a == -1
-    half = miss[..., 0] != miss[..., 1]
-    if half.any():
-        k, v = np.argwhere(half)[0]
-        raise ValueError(f"{path}, line {rows[k][0]}: view {v} has {a[k, v].tolist()}; an unseen observation "
-                         "is '-1 -1'")
-    a[miss.all(-1)] = np.nan
-    return a.transpose(1, 0, 2)
-
-
-def read_calibration(path, n_views):
-    """Read K: one 3×3 matrix shared by all views (3 rows) or one per view stacked (3·V rows).
-
-    Returns
-    -------
-    K : (V, 3, 3) ndarray
-        Scaled so that ``K[2, 2] == 1``.
-
-    Raises
-    ------
-    ValueError
-        Naming the file and line: a row without exactly 3 numbers, a row count other than 3 or 3·V,
-        a last row that is not ``0 0 k`` (k ≠ 0), or a singular matrix.
-    """
-    rows = _numeric_rows(path, "calibration")
-    for lineno, vals in rows:
-        if len(vals) != 3:
-            raise ValueError(f"{path}, line {lineno}: {len(vals)} numbers; each row of K holds 3")
-    if len(rows) not in (3, 3 * n_views):
-        raise ValueError(f"{path}: {len(rows)} rows; expected 3 (one K shared by all views) or {3 * n_views} "
-                         f"(one 3x3 K per view for the {n_views} views of the tracks file)")
-    Ks = np.array([vals for _, vals in rows]).reshape(-1, 3, 3)
-    for m, K in enumerate(Ks):
-        lines = f"lines {rows[3 * m][0]}-{rows[3 * m + 2][0]}"
-        who = f" (view {m})" if len(Ks) > 1 else ""
-        if K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] == 0:
-            raise ValueError(f"{path}, line {rows[3 * m + 2][0]}{who}: the last row of K must be '0 0 k' with k != 0; "
-                             f"got {K[2].tolist()}")
-        K = K / K[2, 2]
-        if abs(np.linalg.det(K)) <= 1e-12 * np.abs(K).max() ** 3:
-            raise ValueError(f"{path}, {lines}{who}: K is singular (det = {np.linalg.det(K):.3g})")
-        Ks[m] = K
-    return np.repeat(Ks, n_views, axis=0) if len(Ks) == 1 else Ks
-
-
-def write_tracks(path, tracks):
-    """Write ``tracks`` (V, T, 2), NaN where unseen, as a VGG track file (inverse of :func:`read_tracks`)."""
-    a = np.asarray(tracks, float).transpose(1, 0, 2).reshape(np.shape(tracks)[1], -1)
-    Path(path).write_text("".join(" ".join("-1" if np.isnan(v) else repr(float(v)) for v in row) + "\n" for row in a))
-
-
-def _write_atomically(path, text):
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    return tmp
-
-
-def main(argv=None):
-    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
-
-    Exit status 0 on success, 2 for a bad input file or argument (nothing is written), 1 when the
-    reconstruction itself fails.
-    """
+def _parser():
     parser = argparse.ArgumentParser(
         prog="python -m labutils.sfm",
         description="Incremental structure from motion from VGG-format tracks and known calibration.")
     parser.add_argument("tracks", help="track file: one row per track, 'x y' per view, -1 -1 where unseen")
     parser.add_argument("K", help="calibration: one 3x3 matrix shared by all views, or one per view stacked (3V rows)")
     parser.add_argument("--out", required=True, help="the result, JSON: cameras (null if unregistered) and points")
-    parser.add_argument("--ply", help="also write the points as an ASCII PLY file")
+    parser.add_argument("--ply", help="also write the points as a PLY file")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
     parser.add_argument("--threshold", type=float, default=4.0, help="pixel threshold (default 4)")
-    parser.add_argument("--quiet", action="store_true", help="print only the summary line")
-    args = parser.parse_args(argv)
+    parser.add_argument("--quiet", action="store_true", help="no progress log, only the summary line")
+    return parser
 
-    def fail(msg, code):
-        print(f"error: {msg}", file=sys.stderr)
-        return code
 
+def main(argv=None):
+    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
+
+    The progress log goes to stderr, the summary to stdout. Exit status 0 on success; 2 for a bad input file or
+    argument, an output that cannot be written (checked before the reconstruction), or a reconstruction that
+    fails — one line on stderr, and nothing is written.
+    """
+    args = _parser().parse_args(argv)
+    tracks = read_tracks(args.tracks)
+    K = read_calibration(args.K, tracks.shape[0])
+    outs = [_cli.check_output_path(args.out)] + ([_cli.check_output_path(args.ply)] if args.ply else [])
+    if not (np.isfinite(args.threshold) and args.threshold > 0):
+        raise _cli.CommandError(f"--threshold must be a positive number of pixels; got {args.threshold}")
     try:
-        tracks = read_tracks(args.tracks)
-        K = read_calibration(args.K, tracks.shape[0])
+        with contextlib.redirect_stdout(sys.stderr):
+            rec = incremental_sfm(tracks, K, rng=np.random.default_rng(args.seed), threshold_px=args.threshold,
+                                  verbose=not args.quiet)
     except ValueError as exc:
-        return fail(exc, 2)
-    for out in [args.out] + ([args.ply] if args.ply else []):
-        if not Path(out).parent.resolve().is_dir():
-            return fail(f"{out}: the folder {Path(out).parent} does not exist", 2)
-    if not args.threshold > 0:
-        return fail(f"--threshold must be positive; got {args.threshold}", 2)
-    try:
-        rec = incremental_sfm(tracks, K, np.random.default_rng(args.seed), threshold_px=args.threshold,
-                              verbose=not args.quiet)
-    except ValueError as exc:
-        return fail(f"reconstruction failed: {exc}", 1)
-    tmps = [(_write_atomically(args.out, json.dumps(rec.to_dict()) + "\n"), args.out)]
+        raise _cli.CommandError(f"{args.tracks}: the reconstruction failed: {exc}") from None
+    _cli.write_atomically(outs[0], json.dumps(rec.to_dict()) + "\n")
     if args.ply:
-        tmps.append((_write_atomically(args.ply, ply_text(rec.X[np.isfinite(rec.X[:, 0])])), args.ply))
-    for tmp, dst in tmps:
-        os.replace(tmp, dst)
+        _cli.write_atomically(outs[1], ply_text(rec.X[np.isfinite(rec.X[:, 0])]))
     print(rec.summary())
     print(f"wrote {args.out}" + (f" and {args.ply}" if args.ply else ""))
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -4,8 +4,12 @@ Every random choice comes from the ``rng`` argument (a ``numpy.random.Generator`
 """
 import numpy as np
 
-from .data import Scene
-from .geometry import P_from_KRt, project
+from numpy.typing import ArrayLike
+
+from ._validation import (as_calibration, as_count, as_fraction, as_positive, as_rng, as_rotations,
+                          as_translations)
+from .geometry import P_from_KRt, camera_center, project, rotation_from_angle_axis
+from .scene import Scene
 
 DEFAULT_K = np.array([[1500.0, 0.0, 360.0], [0.0, 1500.0, 288.0], [0.0, 0.0, 1.0]])
 
@@ -41,9 +45,10 @@ def _blob(n, size, rng):
     return X, normals
 
 
-def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_ratio=0.0, rng=None,
-               K=None, image_size=(720, 576), radius=1.0, object_size=None, planar=False, min_views=2,
-               track_noise_px=None, track_outlier_ratio=0.0):
+def make_scene(n_points: int = 200, n_views: int = 2, layout: str = "general", noise_px: float = 1.0,
+               outlier_ratio: float = 0.0, *, rng: np.random.Generator, K: ArrayLike = None,
+               image_size: tuple = (720, 576), radius: float = 1.0, object_size: float = None, planar: bool = False,
+               min_views: int = 2, track_noise_px: float = None, track_outlier_ratio: float = 0.0) -> Scene:
     """A scene with ground truth: cameras, points, noise-free and noisy projections.
 
     Parameters
@@ -76,15 +81,32 @@ def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_
     Scene
         ``source='synthetic'``.
 
+    Raises
+    ------
+    ValueError
+        No ``rng``; a negative noise, a ratio outside [0, 1), a singular K, an unknown layout, ``min_views``
+        outside 2..n_views, or a scene in which no point is seen by ``min_views`` views.
+
     >>> s = make_scene(50, 3, rng=np.random.default_rng(0))
     >>> s.R.shape, s.X.shape, s.x_meas.shape
     ((3, 3, 3), (50, 3), (3, 50, 2))
     """
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
-    if n_views < 2 or n_points < 1:
-        raise ValueError(f"need n_views >= 2 and n_points >= 1; got {n_views} and {n_points}")
-    K = DEFAULT_K.copy() if K is None else np.asarray(K, float)
+    as_rng(rng)
+    n_points, n_views = as_count(n_points, "n_points", 1), as_count(n_views, "n_views", 2)
+    noise_px = as_positive(noise_px, "noise_px", allow_zero=True)
+    outlier_ratio = as_fraction(outlier_ratio, "outlier_ratio")
+    track_outlier_ratio = as_fraction(track_outlier_ratio, "track_outlier_ratio")
+    if track_noise_px is not None:
+        track_noise_px = as_positive(track_noise_px, "track_noise_px", allow_zero=True)
+    min_views = as_count(min_views, "min_views", 2)
+    if min_views > n_views:
+        raise ValueError(f"min_views must be at most n_views = {n_views}; got {min_views}")
+    radius = as_positive(radius, "radius")
+    if object_size is not None:
+        object_size = as_positive(object_size, "object_size")
+    K = DEFAULT_K.copy() if K is None else as_calibration(K, "K")
+    if np.shape(image_size) != (2,) or not all(as_positive(v, "image_size") for v in image_size):
+        raise ValueError(f"image_size must be (width, height), two positive numbers; got {image_size!r}")
     w, h = image_size
     if object_size is None:
         object_size = 0.12 * radius if layout == "turntable" else 0.3 * radius
@@ -121,12 +143,15 @@ def make_scene(n_points=200, n_views=2, layout="general", noise_px=1.0, outlier_
     inside = (x_true[..., 0] >= 0) & (x_true[..., 0] < w) & (x_true[..., 1] >= 0) & (x_true[..., 1] < h)
     seen = inside & (depth > 0)
     if normals is not None:
-        C = -np.einsum("vji,vj->vi", R, t)
+        C = camera_center(R, t)
         to_cam = C[:, None, :] - X[None]
         facing = np.einsum("vnj,nj->vn", to_cam, normals) / np.linalg.norm(to_cam, axis=-1)
         seen &= facing > 0.25
         keep = seen.sum(0) >= min_views
         X, x_true, seen = X[keep], x_true[:, keep], seen[:, keep]
+        if not keep.any():
+            raise ValueError(f"no point of the turntable object is seen by min_views = {min_views} views: lower "
+                             "min_views or add views")
     x_true[~seen] = np.nan
     x_meas, outliers = _measure(x_true, seen, noise_px, outlier_ratio, (w, h), rng)
     tracks = x_meas
@@ -147,3 +172,38 @@ def _measure(x_true, seen, noise_px, outlier_ratio, image_size, rng):
         outliers[vi[pick], pi[pick]] = True
         x[vi[pick], pi[pick]] = rng.uniform([0, 0], image_size, size=(pick.sum(), 2))
     return x, outliers
+
+
+def perturb_cameras(R: ArrayLike, t: ArrayLike, *, rng: np.random.Generator, rot_deg: float = 1.0,
+                    rel_shift: float = 0.02) -> tuple:
+    """Cameras moved off their poses: a starting point for bundle adjustment with known truth.
+
+    Each camera is rotated by a random small rotation of RMS angle ``rot_deg`` degrees and its centre moved by
+    a random vector of RMS length ``rel_shift`` times the mean distance of the centres from their centroid.
+
+    Parameters
+    ----------
+    R : (V, 3, 3) array_like
+    t : (V, 3) array_like
+    rng : numpy.random.Generator
+    rot_deg, rel_shift : float
+
+    Returns
+    -------
+    R0 : (V, 3, 3) ndarray
+    t0 : (V, 3) ndarray
+
+    >>> R0, t0 = perturb_cameras(np.stack([np.eye(3)] * 3), np.eye(3), rng=np.random.default_rng(0))
+    >>> R0.shape, t0.shape
+    ((3, 3, 3), (3, 3))
+    """
+    as_rng(rng)
+    R = as_rotations(R, "R")
+    t = as_translations(t, "t", n=len(R))
+    rot_deg = as_positive(rot_deg, "rot_deg", allow_zero=True)
+    rel_shift = as_positive(rel_shift, "rel_shift", allow_zero=True)
+    C = camera_center(R, t)
+    scale = np.linalg.norm(C - C.mean(0), axis=1).mean()
+    R0 = rotation_from_angle_axis(rng.normal(size=(len(R), 3)) * np.radians(rot_deg) / np.sqrt(3)) @ R
+    C0 = C + rng.normal(size=C.shape) * rel_shift * scale / np.sqrt(3)
+    return R0, -np.einsum("vij,vj->vi", R0, C0)

@@ -1,16 +1,19 @@
-"""Triangulation: linear (DLT) from two or more views (H&Z Sec. 12.2), and the optimal two-view
-correction (H&Z Sec. 12.5, Alg. 12.1) with the residual of an F built on it.
+"""Triangulation: linear (DLT) from two or more views (H&Z Sec. 12.2), the optimal two-view correction
+(H&Z Sec. 12.5, Alg. 12.1) with the residual of an F built on it, and the robust triangulation of tracks with
+outliers that structure from motion uses.
 """
 import numpy as np
+from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, as_points
+from ._validation import as_calibration, as_fundamental, as_matrix, as_points, as_rotations, as_tracks, as_translations
+from .geometry import camera_center
 
 
 def _normalise_rows(A):
     return A / np.linalg.norm(A, axis=-1, keepdims=True)
 
 
-def triangulate(P1, P2, x1, x2):
+def triangulate(P1: ArrayLike, P2: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     """Linear (DLT) triangulation of corresponding pixels in two views (H&Z Sec. 12.2).
 
     Each point solves ``A X_h = 0`` with the four rows ``x P[2] - P[0]`` and ``y P[2] - P[1]`` of
@@ -31,7 +34,8 @@ def triangulate(P1, P2, x1, x2):
     Raises
     ------
     ValueError
-        Wrong shapes, non-finite values, mismatched lengths, or two identical cameras (no baseline).
+        Wrong shapes, non-finite values, mismatched lengths, or two cameras with the same centre (no baseline:
+        the same camera, or a pure rotation).
 
     Examples
     --------
@@ -42,13 +46,24 @@ def triangulate(P1, P2, x1, x2):
     P1, P2 = as_matrix(P1, "P1", (3, 4)), as_matrix(P2, "P2", (3, 4))
     x1 = as_points(x1, "x1")
     x2 = as_points(x2, "x2", like=x1)
-    M1, M2 = P1 / np.linalg.norm(P1), P2 / np.linalg.norm(P2)
-    if min(np.linalg.norm(M1 - M2), np.linalg.norm(M1 + M2)) < 1e-12:
-        raise ValueError("P1 and P2 are the same camera: no baseline, nothing can be triangulated")
+    C = _centres_h(np.stack([P1, P2]))
+    if _same_centre(C[0], C[1]):
+        raise ValueError("P1 and P2 have the same centre (the same camera, or a pure rotation): no baseline, "
+                         "the points cannot be triangulated")
     return triangulate_multiview(np.stack([P1, P2]), np.stack([x1, x2]))
 
 
-def triangulate_multiview(Ps, xs):
+def _centres_h(Ps):
+    """Homogeneous centres ``(V, 4)`` of cameras ``(V, 3, 4)``: the null vectors ``P C = 0``, unit norm."""
+    return np.linalg.svd(Ps)[2][:, -1]
+
+
+def _same_centre(Ca, Cb, tol=1e-9):
+    """Whether two homogeneous centres are the same point (up to scale and sign)."""
+    return min(np.linalg.norm(Ca - Cb), np.linalg.norm(Ca + Cb)) < tol
+
+
+def triangulate_multiview(Ps: ArrayLike, xs: ArrayLike) -> np.ndarray:
     """Linear (DLT) triangulation from V views, with missing observations (H&Z Sec. 12.2).
 
     Parameters
@@ -61,7 +76,13 @@ def triangulate_multiview(Ps, xs):
     Returns
     -------
     X : (N, 3) ndarray
-        NaN for points seen in fewer than two views.
+        NaN for points seen in fewer than two views, and for points whose observing cameras all share one
+        centre (no baseline: the point's depth is not determined).
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes, non-finite camera matrices, infinite pixels, or every camera at the same centre.
 
     Examples
     --------
@@ -72,14 +93,20 @@ def triangulate_multiview(Ps, xs):
     array([[1. , 0.5, 5. ]])
     """
     Ps = np.asarray(Ps, dtype=float)
-    xs = np.asarray(xs, dtype=float)
     if Ps.ndim != 3 or Ps.shape[1:] != (3, 4):
         raise ValueError(f"Ps must have shape (V, 3, 4); got {Ps.shape}")
-    if xs.ndim != 3 or xs.shape[0] != Ps.shape[0] or xs.shape[2] != 2:
-        raise ValueError(f"xs must have shape (V, N, 2) with V = {Ps.shape[0]}; got {xs.shape}")
     if not np.all(np.isfinite(Ps)):
         raise ValueError("Ps has non-finite entries")
+    xs = as_tracks(xs, "xs")
+    if xs.shape[0] != Ps.shape[0]:
+        raise ValueError(f"xs must have shape (V, N, 2) with V = {Ps.shape[0]} (one row of pixels per camera); "
+                         f"got {xs.shape}")
     seen = np.all(np.isfinite(xs), axis=-1)                      # (V, N)
+    C = _centres_h(Ps)
+    same = np.minimum(np.linalg.norm(C[:, None] - C[None], axis=-1), np.linalg.norm(C[:, None] + C[None], axis=-1)) < 1e-9
+    label = np.argmax(same, axis=1)                               # cameras with one centre share a label
+    if len(C) >= 2 and np.all(label == label[0]):
+        raise ValueError("every camera in Ps has the same centre (no baseline): nothing can be triangulated")
     X = np.full((xs.shape[1], 3), np.nan)
     n_seen = seen.sum(0)
     order = np.argsort(~seen, axis=0, kind="stable")              # each point's observing views first
@@ -94,24 +121,15 @@ def triangulate_multiview(Ps, xs):
         X_h = np.linalg.svd(A)[2][:, -1]
         with np.errstate(divide="ignore", invalid="ignore"):
             X[cols] = X_h[:, :3] / X_h[:, 3:]
+        # a point seen only from one centre has no baseline: its depth is arbitrary
+        lab = label[v]
+        X[cols[lab.min(0) == lab.max(0)]] = np.nan
     return X
 
 
 # --------------------------------------------------------------------------------------------------
 # The optimal two-view correction (H&Z Sec. 12.5, Alg. 12.1)
 # --------------------------------------------------------------------------------------------------
-
-def _rank2_fundamental(F, name="F"):
-    """F as a (3, 3) array of rank 2 with unit Frobenius norm; ``ValueError`` if it is far from rank 2."""
-    F = as_matrix(F, name, (3, 3))
-    U, s, Vt = np.linalg.svd(F)
-    if s[0] == 0 or s[1] < 1e-12 * s[0]:
-        raise ValueError(f"{name} has rank < 2 (singular values {s}): it is not a fundamental matrix")
-    if s[2] > 1e-7 * s[0]:
-        raise ValueError(f"{name} does not have rank 2 (singular values {s / s[0]} after scaling): "
-                         "enforce rank 2 first (H&Z Sec. 11.1.1)")
-    return (U[:, :2] * (s[:2] / s[0])) @ Vt[:2], Vt[2], U[:, 2]
-
 
 def _polymul(p, q):
     """Product of batched polynomials, coefficients highest degree first: (n, a) x (n, b) -> (n, a + b - 1)."""
@@ -150,7 +168,7 @@ def _poly_roots(coef):
     return roots
 
 
-def triangulate_optimal(F, x1, x2):
+def triangulate_optimal(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> tuple:
     """Optimal (maximum-likelihood) correction of two-view correspondences (H&Z Sec. 12.5, Alg. 12.1).
 
     Finds, for each pair, the points ``x1_hat, x2_hat`` that satisfy ``x2_hatᵀ F x1_hat = 0`` exactly and
@@ -187,7 +205,7 @@ def triangulate_optimal(F, x1, x2):
     >>> x1_hat.round(9), x2_hat.round(9)
     (array([[0., 1.]]), array([[5., 1.]]))
     """
-    F, e1, e2 = _rank2_fundamental(F)
+    F, e1, e2 = as_fundamental(F)
     x1 = as_points(x1, "x1")
     x2 = as_points(x2, "x2", like=x1)
     n = x1.shape[0]
@@ -260,7 +278,7 @@ def triangulate_optimal(F, x1, x2):
     return x1_hat, x2_hat
 
 
-def fundamental_residual(F, x1, x2):
+def fundamental_residual(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> float:
     """RMS geometric residual of an F: the optimal correction's distance, over all 4N coordinates.
 
     ``sqrt(sum(|x1 - x1_hat|² + |x2 - x2_hat|²) / (4 N))`` with ``x1_hat, x2_hat`` from
@@ -289,3 +307,198 @@ def fundamental_residual(F, x1, x2):
     x2 = as_points(x2, "x2", like=x1)
     x1_hat, x2_hat = triangulate_optimal(F, x1, x2)
     return float(np.sqrt((((x1 - x1_hat) ** 2).sum() + ((x2 - x2_hat) ** 2).sum()) / (4 * x1.shape[0])))
+
+
+# --------------------------------------------------------------------------------------------------
+# Robust triangulation of tracks (structure from motion)
+# --------------------------------------------------------------------------------------------------
+
+def ray_angles_deg(C: ArrayLike, X: ArrayLike, mask: ArrayLike) -> np.ndarray:
+    """Triangulation angle of each point: the largest angle between two of its viewing rays (degrees).
+
+    Parameters
+    ----------
+    C : (V, 3) array_like
+        Camera centres.
+    X : (T, 3) array_like
+        Points.
+    mask : (V, T) bool array_like
+        Which views observe which point.
+
+    Returns
+    -------
+    angle : (T,) ndarray
+        NaN for points with fewer than two observations.
+
+    >>> C = [[0, 0, 0], [1, 0, 0], [2, 0, 0]]
+    >>> np.round(ray_angles_deg(C, [[1, 0, 1], [1, 0, 1]], [[1, 1], [0, 1], [1, 0]]), 6)
+    array([90., 45.])
+    """
+    C, X, mask = np.asarray(C, float), np.asarray(X, float), np.asarray(mask, bool)
+    n = mask.sum(0)
+    angle = np.full(X.shape[0], np.nan)
+    order = np.argsort(~mask, axis=0, kind="stable")                      # observing views first
+    for L in np.unique(n[n >= 2]):                                         # tracks grouped by length
+        cols = np.flatnonzero(n == L)
+        rays = X[cols][None] - C[order[:L, cols]]                          # (L, m, 3)
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        cos = np.einsum("imk,jmk->mij", rays, rays).min(axis=(1, 2))
+        angle[cols] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return angle
+
+
+def _camera_matrices(K, R, t, views):
+    return np.einsum("vij,vjk->vik", K[views], np.concatenate([R[views], t[views, :, None]], axis=2))
+
+
+def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, views: ArrayLike,
+                       mask: ArrayLike, *, threshold_px: float, min_angle_deg: float) -> tuple:
+    """Robust triangulation of tracks from registered views (H&Z Sec. 12.2; the idea of COLMAP's RANSAC
+    triangulation, with every pair of views tried).
+
+    For each track, every pair of its observations is triangulated (midpoint of the two rays) and scored
+    by how many of the track's observations then reproject within ``threshold_px`` in front of the camera
+    (the consensus). The observations on which all the largest consensus sets agree are triangulated by
+    multi-view DLT and the consensus taken again (twice); a track whose largest consensus sets share fewer
+    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected. Then, while some kept observation reprojects
+    too far, the worst one is dropped and the track triangulated again. A point is accepted when at least
+    two observations remain and its triangulation angle is at least ``min_angle_deg``. Trying all pairs
+    makes the result depend on the cameras only, not on the order in which views were added.
+
+    Parameters
+    ----------
+    tracks : (V, N, 2) array_like
+        Pixels, NaN where unseen (the columns are the tracks to triangulate).
+    K, R : (V, 3, 3) array_like
+    t : (V, 3) array_like
+        Calibration and poses (used only for ``views``).
+    views : (m,) int array_like
+        The registered views to use.
+    mask : (V, N) bool array_like
+        Observations allowed (outside ``views`` they are ignored).
+    threshold_px, min_angle_deg : float
+
+    Returns
+    -------
+    X : (N, 3) ndarray
+        NaN where the track was rejected.
+    used : (V, N) bool ndarray
+        The observations that support each accepted point (all False for a rejected one).
+
+    Examples
+    --------
+    >>> from labutils.synthetic import make_scene
+    >>> s = make_scene(20, 3, noise_px=0.0, rng=np.random.default_rng(0))
+    >>> x = s.x_true.copy(); x[2, 0] += 50                     # one gross outlier
+    >>> X, used = triangulate_tracks(x, np.stack([s.K] * 3), s.R, s.t, [0, 1, 2], s.visible,
+    ...                              threshold_px=1.0, min_angle_deg=1.0)
+    >>> bool(np.allclose(X, s.X)), int(used.sum()), bool(used[2, 0])
+    (True, 59, False)
+    """
+    tracks = as_tracks(tracks)
+    V, N = tracks.shape[:2]
+    K = as_calibration(K, "K", n_views=V)
+    R, t = np.asarray(R, float), np.asarray(t, float)
+    if R.shape != (V, 3, 3) or t.shape != (V, 3):
+        raise ValueError(f"R and t must have shapes ({V}, 3, 3) and ({V}, 3) (NaN rows for views not used); "
+                         f"got {R.shape} and {t.shape}")
+    views = np.asarray(views)
+    if views.ndim != 1 or (views.size and (views.dtype.kind not in "iu" or views.min() < 0 or views.max() >= V)):
+        raise ValueError(f"views must be a 1-D array of view indices in 0..{V - 1}; got {views!r}")
+    views = views.astype(int)
+    as_rotations(R[views], "R[views]")
+    as_translations(t[views], "t[views]")
+    mask = np.asarray(mask, bool)
+    if mask.shape != (V, N):
+        raise ValueError(f"mask must have shape ({V}, {N}) like tracks[..., 0]; got {mask.shape}")
+    if not (np.isfinite(threshold_px) and threshold_px > 0) and threshold_px != np.inf:
+        raise ValueError(f"threshold_px must be a positive number of pixels (or inf); got {threshold_px}")
+    use = np.zeros((V, N), bool)
+    use[views] = mask[views] & np.all(np.isfinite(tracks[views]), axis=-1)
+    X = np.full((N, 3), np.nan)
+    if N == 0 or views.size < 2:
+        return X, np.zeros((V, N), bool)
+    Ps = np.zeros((V, 3, 4))
+    Ps[views] = _camera_matrices(K, R, t, views)           # K33 = 1: q_z has the sign of the depth
+    xs = np.where(use[..., None], tracks, 0.0)
+
+    def errors(Xq, cam, col):
+        """Reprojection errors of points ``Xq`` (n, 3) in views ``cam`` against ``xs[cam, col]``; inf behind."""
+        q = np.einsum("nij,nj->ni", Ps[cam], np.hstack([Xq, np.ones((len(Xq), 1))]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.linalg.norm(q[:, :2] / q[:, 2:] - xs[cam, col], axis=1)
+        e[~(q[:, 2] > 0)] = np.inf
+        return e
+
+    # 1. every pair of observations of every track, and its consensus in the whole track
+    cand = np.flatnonzero(use.sum(0) >= 2)
+    if cand.size == 0:
+        return X, np.zeros((V, N), bool)
+    n_obs = use[:, cand].sum(0)
+    L = int(n_obs.max())
+    vid = np.argsort(~use[:, cand], axis=0, kind="stable")[:L]           # (L, n): observing views first
+    a, b = np.triu_indices(L, 1)
+    pa, col = np.nonzero(b[:, None] < n_obs[None])                         # all pairs of each track
+    va, vb, trk = vid[a[pa], col], vid[b[pa], col], cand[col]
+    # the midpoint of the two viewing rays (H&Z Sec. 12.1): cheap, and only used to find the consensus
+    Kinv = np.zeros((V, 3, 3))
+    Kinv[views] = np.linalg.inv(K[views])
+    C = np.zeros((V, 3))
+    C[views] = camera_center(R[views], t[views])
+    Rt = np.swapaxes(np.where(use.any(1)[:, None, None], R, 0.0), 1, 2)
+    xh = np.concatenate([xs, np.ones((V, N, 1))], axis=2)
+    da = np.einsum("nij,nj->ni", Rt[va] @ Kinv[va], xh[va, trk])
+    db = np.einsum("nij,nj->ni", Rt[vb] @ Kinv[vb], xh[vb, trk])
+    w0 = C[va] - C[vb]
+    aa, ab, bb = (da * da).sum(1), (da * db).sum(1), (db * db).sum(1)
+    d, e = (da * w0).sum(1), (db * w0).sum(1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = aa * bb - ab ** 2
+        sa, sb = (ab * e - bb * d) / den, (aa * e - ab * d) / den
+        Xp = 0.5 * (C[va] + sa[:, None] * da + C[vb] + sb[:, None] * db)
+    Xp[~(np.abs(den) > 1e-12 * aa * bb) | ~np.all(np.isfinite(Xp), axis=1)] = np.inf
+    # each pair's point against every observation of its track
+    n_po = n_obs[col]
+    pair_of = np.repeat(np.arange(col.size), n_po)
+    slot = np.arange(pair_of.size) - np.repeat(np.cumsum(n_po) - n_po, n_po)
+    cam = vid[slot, col[pair_of]]
+    e = errors(np.nan_to_num(Xp[pair_of], posinf=0.0), cam, trk[pair_of])
+    e[~np.isfinite(Xp[pair_of, 0])] = np.inf
+    inl = np.isfinite(e) & (e <= threshold_px)                            # inf: behind a camera
+    count = np.bincount(pair_of, inl, col.size)
+    most = np.zeros(N)
+    np.maximum.at(most, trk, count)
+    top = count == most[trk]                                               # the pairs with the largest consensus
+    # the observations on which all the largest consensus sets agree (an ambiguous track keeps < 2)
+    n_top = np.bincount(trk[top], minlength=N)
+    votes = np.zeros((V, N), int)
+    w = top[pair_of] & inl
+    np.add.at(votes, (cam[w], trk[pair_of[w]]), 1)
+    cons = (votes == n_top[None]) & (votes > 0)
+    # 2. refit on the consensus set and take the consensus again
+    for _ in range(2):
+        todo = np.flatnonzero(cons.sum(0) >= 2)
+        X[todo] = triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan))
+        cam, pt = np.nonzero(use[:, todo])
+        cons[:, todo] = False
+        e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
+        cons[cam, todo[pt]] = np.isfinite(e) & (e <= threshold_px)
+    use &= cons
+    # 3. drop the worst observation while one reprojects too far
+    todo = np.flatnonzero(use.sum(0) >= 2)
+    while todo.size:
+        X[todo] = triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan))
+        cam, pt = np.nonzero(use[:, todo])
+        err = np.full((V, todo.size), -1.0)
+        err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
+        worst = np.argmax(err, axis=0)
+        e = err[worst, np.arange(todo.size)]
+        bad = np.isinf(e) | (e > threshold_px)
+        use[worst[bad], todo[bad]] = False
+        todo = todo[bad & (use[:, todo].sum(0) >= 2)]
+    ok = use.sum(0) >= 2
+    angle = ray_angles_deg(C, np.where(ok[:, None], np.nan_to_num(X), 0.0), use & ok)
+    ok &= angle >= min_angle_deg
+    X[~ok] = np.nan
+    use[:, ~ok] = False
+    return X, use

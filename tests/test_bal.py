@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 
 from labutils.bal import BALFormatError, BALProblem, format_bal, parse_bal, read_bal, write_bal
-from labutils.bundle import reprojection_residuals, robust_cost
+from labutils.reprojection import reprojection_residuals
+from labutils.robust import robust_cost
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def small_problem(rng, noise_px=0.5, n_points=40, n_views=4):
     """A BAL problem whose cameras look down -z at points near the origin, with a perturbed start."""
-    from labutils.bundle import camera_params_from_Rt
-    from labutils.data import observations
+    from labutils.reprojection import camera_params_from_Rt
+    from labutils.scene import observations
     from labutils.synthetic import make_scene
 
     s = make_scene(n_points, n_views, noise_px=0.0, rng=rng)
@@ -40,7 +41,7 @@ def test_round_trip(rng, tmp_path):
 
 
 def test_reads_the_ladybug_file():
-    from labutils.data import DataNotFoundError, find_data
+    from labutils.datapath import DataNotFoundError, find_data
 
     try:
         path = find_data("bal/problem-49-7776-pre.txt")

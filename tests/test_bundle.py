@@ -2,10 +2,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from labutils.bundle import (Rt_from_camera_params, bundle_adjust, camera_params_from_Rt, jacobian_sparsity,
-                             left_jacobian_so3, reprojection_jacobian, reprojection_residuals, robust_cost, solve)
-from labutils.data import observations
-from labutils.geometry import rotation_from_angle_axis, skew
+from labutils.bundle import bundle_adjust, bundle_adjust_params
+from labutils.geometry import left_jacobian_so3, rotation_from_angle_axis, skew
+from labutils.reprojection import (Rt_from_camera_params, camera_params_from_Rt, jacobian_sparsity,
+                                   reprojection_jacobian, reprojection_residuals)
+from labutils.robust import robust_cost
+from labutils.scene import observations
 from labutils.metrics import ml_residual_bound, pose_errors
 from labutils.synthetic import make_scene
 
@@ -159,7 +161,7 @@ def test_one_fixed_camera_is_the_anchor(rng):
 
 
 def test_single_threaded_blas_restores_the_thread_count():
-    from labutils.bundle import _openblas_controls, single_threaded_blas
+    from labutils._blas import _openblas_controls, single_threaded_blas
 
     before = [get() for get, _ in _openblas_controls()]
     with single_threaded_blas():
@@ -219,7 +221,7 @@ def test_bal_model_solvers_agree_and_intrinsics_option(rng):
     X0 = X + 0.005 * rng.normal(size=X.shape)
     cost = {}
     for fix in (False, True):
-        out = {solver: solve(cp0, X0, ci, pi, x, None, solver=solver, fix_intrinsics=fix, max_iter=300)
+        out = {solver: bundle_adjust_params(cp0, X0, ci, pi, x, None, solver=solver, fix_intrinsics=fix, max_iter=300)
                for solver in ("lm-schur", "scipy")}
         a, b = out["lm-schur"].cost_final, out["scipy"].cost_final
         assert abs(a - b) / b < 1e-3
@@ -299,4 +301,4 @@ def test_bad_input(rng):
     with pytest.raises(ValueError, match="needs the calibration K"):
         reprojection_residuals(cp, X0, ci, pi, x, None)
     with pytest.raises(ValueError, match="fix_intrinsics"):
-        solve(cp, X0, ci, pi, x, s.K, fix_intrinsics=True)
+        bundle_adjust_params(cp, X0, ci, pi, x, s.K, fix_intrinsics=True)

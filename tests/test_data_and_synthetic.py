@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 import labutils
-from labutils.data import find_data, nan_tracks, observations, tracks_from_observations
+from labutils.datapath import find_data
+from labutils.scene import nan_tracks, observations, tracks_from_observations
 from labutils.geometry import depths, project
 from labutils.synthetic import make_scene
 
@@ -13,11 +14,21 @@ def test_missing_data_names_files_and_source(monkeypatch):
     with pytest.raises(labutils.DataNotFoundError) as err:
         labutils.load_dino()
     assert "BAdino2.mat" in str(err.value) and "viff.000.png" in str(err.value) and "robots.ox.ac.uk" in str(err.value)
+    assert "python -m labutils.data fetch dino" in str(err.value) and "LABUTILS_DATA=none" in str(err.value)
+
+
+def test_missing_data_names_each_folder_searched(tmp_path, monkeypatch):
+    monkeypatch.setenv("LABUTILS_DATA", str(tmp_path / "mine"))
+    with pytest.raises(labutils.DataNotFoundError) as err:
+        labutils.find_data("nothing-here/file.txt")
+    lines = str(err.value).splitlines()
+    assert str(tmp_path / "mine") in lines[1] and "does not exist" in lines[1]      # the order of the data path
+    assert "data" in lines[2] and "fetch nothing-here" in str(err.value)
 
 
 def test_fallback_is_synthetic_and_says_so(monkeypatch, capsys):
     monkeypatch.setenv("LABUTILS_DATA", "none")
-    scene = labutils.load_scene(np.random.default_rng(0))
+    scene = labutils.load_scene(rng=np.random.default_rng(0))
     assert scene.source == "synthetic"
     assert "SYNTHETIC" in capsys.readouterr().out
 
@@ -57,8 +68,10 @@ def test_synthetic_is_deterministic_and_needs_rng():
     a = make_scene(50, 3, rng=np.random.default_rng(7))
     b = make_scene(50, 3, rng=np.random.default_rng(7))
     assert np.array_equal(a.x_meas, b.x_meas, equal_nan=True)
-    with pytest.raises(ValueError, match="rng"):
+    with pytest.raises(TypeError, match="rng"):              # required, keyword-only
         make_scene(50, 3)
+    with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
+        make_scene(50, 3, rng=None)
 
 
 def test_dino_conventions(dino):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from labutils.epipolar import (GoldStandardProblem, decompose_essential, epipole_search, essential_from_fundamental,
+from labutils.epipolar import (GoldStandardProblem, cheirality_counts, decompose_essential, epipole_search, essential_from_fundamental,
                                fundamental_7point, fundamental_8point, fundamental_from_pose, fundamental_gold_standard,
                                fundamental_ransac, fundamental_residual, hartley_normalisation, homography_dlt,
                                pose_from_essential, sampson_distance)
@@ -48,7 +48,7 @@ def test_bad_input(rng):
         with pytest.raises(ValueError, match="non-finite"):
             fundamental_8point(y, x2)
         with pytest.raises(ValueError, match="non-finite"):
-            fundamental_gold_standard(y, x2)
+            fundamental_gold_standard(y, x2).F
     with pytest.raises(ValueError, match="coincide"):
         fundamental_8point(np.ones((10, 2)), x2[:10])
     with pytest.raises(ValueError, match="exactly 7"):
@@ -56,7 +56,7 @@ def test_bad_input(rng):
     with pytest.raises(ValueError, match="rng"):
         fundamental_ransac(x1, x2, rng=None)
     with pytest.raises(ValueError, match="threshold"):
-        fundamental_ransac(x1, x2, threshold=0.0, rng=rng)
+        fundamental_ransac(x1, x2, threshold_px=0.0, rng=rng)
     with pytest.raises(ValueError, match="singular"):
         essential_from_fundamental(np.eye(3), np.zeros((3, 3)), s.K)
     with pytest.raises(ValueError, match="rank < 2"):
@@ -64,7 +64,7 @@ def test_bad_input(rng):
     with pytest.raises(ValueError, match=r"shape \(3, 3\)"):
         pose_from_essential(np.eye(2), x1, x2, s.K, s.K)
     with pytest.raises(ValueError, match="rank 2"):
-        fundamental_gold_standard(x1, x2, F0=np.eye(3))
+        fundamental_gold_standard(x1, x2, F0=np.eye(3)).F
 
 
 @pytest.mark.parametrize("case", ["plane", "rotation"])
@@ -78,7 +78,7 @@ def test_noise_free_degenerate_raises(case, rng):
         with pytest.raises(ValueError, match="degenerate.*plane.*baseline"):
             fundamental_8point(x1[:n], x2[:n])
     with pytest.raises(ValueError, match="degenerate"):
-        fundamental_gold_standard(x1, x2)
+        fundamental_gold_standard(x1, x2).F
     with pytest.raises(ValueError, match="degenerate"):
         fundamental_ransac(x1, x2, rng=rng, max_iter=200)
     assert fundamental_7point(x1[:7], x2[:7]) == []        # a degenerate minimal sample gives no model
@@ -105,7 +105,7 @@ def test_noisy_degenerate_raises_with_enough_points(case, rng):
 def test_invariants(rng):
     s = make_scene(60, 2, noise_px=1.0, rng=rng)
     x1, x2, _ = s.pair(0, 1)
-    for F in (fundamental_8point(x1, x2), fundamental_gold_standard(x1, x2),
+    for F in (fundamental_8point(x1, x2), fundamental_gold_standard(x1, x2).F,
               fundamental_ransac(x1, x2, rng=rng)[0], *fundamental_7point(x1[:7], x2[:7])):
         sv = np.linalg.svd(F, compute_uv=False)
         assert abs(np.linalg.norm(F) - 1) < 1e-12 and sv[2] < 1e-12 * sv[0]
@@ -133,10 +133,11 @@ def test_noise_free_recovery(layout, rng):
     F = fundamental_8point(x1, x2)
     assert same_up_to_sign(F, F_true) < 1e-8
     assert sampson_distance(F, x1, x2).max() < 1e-8
-    assert same_up_to_sign(fundamental_gold_standard(x1, x2), F_true) < 1e-8
+    assert same_up_to_sign(fundamental_gold_standard(x1, x2).F, F_true) < 1e-8
     E = essential_from_fundamental(F, s.K, s.K)
     assert same_up_to_sign(E, skew(t_true) @ R_true) < 1e-8
-    R, t, counts = pose_from_essential(E, x1, x2, s.K, s.K, return_counts=True)
+    R, t = pose_from_essential(E, x1, x2, s.K, s.K)
+    counts = cheirality_counts(E, x1, x2, s.K, s.K)
     assert rotation_error_deg(R, R_true) < 1e-6 and angle_between_deg(t, t_true) < 1e-6
     assert sorted(counts)[-1] == len(x1) and sorted(counts)[-2] < len(x1)    # cheirality picks one
     Fs = fundamental_7point(x1[:7], x2[:7])
@@ -179,7 +180,7 @@ def test_ransac_finds_inliers(rng):
     s = make_scene(200, 2, noise_px=0.5, outlier_ratio=0.3, rng=rng)
     x1, x2, idx = s.pair(0, 1)
     outlier = s.outliers[0, idx] | s.outliers[1, idx]
-    F, inl = fundamental_ransac(x1, x2, threshold=1.5, rng=rng)
+    F, inl = fundamental_ransac(x1, x2, threshold_px=1.5, rng=rng)
     R_true, t_true, F_true = truth(s)
     assert inl.dtype == bool and inl.shape == (len(x1),)
     assert np.all(inl[~outlier].mean() > 0.97)                           # keeps the good ones ...
@@ -191,7 +192,7 @@ def test_ransac_finds_inliers(rng):
 
 def test_ransac_real_tracks(dino):
     x1, x2, _ = dino.pair(10, 11, which="tracks")
-    F, inl = fundamental_ransac(x1, x2, threshold=1.0, rng=np.random.default_rng(0))
+    F, inl = fundamental_ransac(x1, x2, threshold_px=1.0, rng=np.random.default_rng(0))
     assert inl.mean() > 0.9
     assert fundamental_residual(F, x1[inl], x2[inl]) < 0.5
 
@@ -239,11 +240,13 @@ def test_our_lm_reaches_the_scipy_optimum(rng):
 def test_gold_standard_returns_points(rng):
     s = make_scene(50, 2, noise_px=1.0, rng=rng)
     x1, x2, _ = s.pair(0, 1)
-    F, x1_hat, x2_hat = fundamental_gold_standard(x1, x2, return_points=True)
+    gs = fundamental_gold_standard(x1, x2)
+    F, x1_hat, x2_hat = gs.F, gs.x1_hat, gs.x2_hat
     a, b = homogeneous(x1_hat), homogeneous(x2_hat)
     assert np.abs(np.einsum("ni,ij,nj->n", b, F, a)).max() < 1e-10 * np.abs(a).max() * np.abs(b).max()
     rms = np.sqrt((((x1 - x1_hat) ** 2).sum() + ((x2 - x2_hat) ** 2).sum()) / (4 * len(x1)))
     assert rms == pytest.approx(fundamental_residual(F, x1, x2), rel=1e-6)
+    assert gs.residual == pytest.approx(rms, rel=1e-9)
 
 
 # Trial counts for the ML bound: per trial 4N r² / σ² ~ χ²(N - 7) (H&Z Result 5.2), so the pooled mean of r²
@@ -257,7 +260,7 @@ def test_gold_standard_reaches_the_ml_bound(n, trials):
         s = make_scene(n, 2, layout="general", noise_px=1.0, rng=rng)
         x1, x2, _ = s.pair(0, 1)
         F8 = fundamental_8point(x1, x2)
-        r = fundamental_residual(fundamental_gold_standard(x1, x2, F0=F8), x1, x2)
+        r = fundamental_residual(fundamental_gold_standard(x1, x2, F0=F8).F, x1, x2)
         worse_than_8pt += r > fundamental_residual(F8, x1, x2)
         sq.append(r ** 2)
         expected.append((len(x1) - 7) / (4 * len(x1)))             # σ = 1
@@ -275,7 +278,7 @@ def test_gold_standard_forward_motion(n, trials):
         x1, x2, _ = s.pair(0, 1)
         # we compare estimators on every scene, so the (tested above) near-degeneracy screen is off here
         F8 = fundamental_8point(x1, x2, h_ratio=None)
-        r = fundamental_residual(fundamental_gold_standard(x1, x2, F0=F8), x1, x2)
+        r = fundamental_residual(fundamental_gold_standard(x1, x2, F0=F8).F, x1, x2)
         assert r <= fundamental_residual(F8, x1, x2)
         assert r <= fundamental_residual(truth(s)[2], x1, x2)
 
@@ -311,7 +314,7 @@ def test_pose_error_scales_with_noise():
             s = make_scene(100, 2, noise_px=sigma, rng=rng)
             x1, x2, _ = s.pair(0, 1)
             R_true, t_true, _ = truth(s)
-            E = essential_from_fundamental(fundamental_gold_standard(x1, x2), s.K, s.K)
+            E = essential_from_fundamental(fundamental_gold_standard(x1, x2).F, s.K, s.K)
             R, t = pose_from_essential(E, x1, x2, s.K, s.K)
             e.append(rotation_error_deg(R, R_true))
         errs.append(np.median(e))

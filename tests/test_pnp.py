@@ -148,10 +148,11 @@ def test_refine_pose_bad_input(rng):
 
 def test_pnp_ransac_noise_free_is_exact(rng):
     X, x, R, t, out = pnp_problem(rng, noise_px=0.0, outlier_ratio=0.4)
-    R1, t1, inl, info = pnp_ransac(X, x, K_SKEW, rng=rng, return_info=True)
+    res = pnp_ransac(X, x, K_SKEW, rng=rng)
+    R1, t1, inl = res.R, res.t, res.inliers
     assert pose_distance(R1, t1, R, t) < 1e-9
     assert np.array_equal(inl, ~out)
-    assert info["n_iter"] <= ransac_iterations(0.6, 3, 0.9999) + 1          # the adaptive stop
+    assert res.n_iter <= ransac_iterations(0.6, 3, 0.9999) + 1          # the adaptive stop
 
 
 def test_pnp_ransac_inliers_and_error_band_tied_to_noise():
@@ -160,7 +161,8 @@ def test_pnp_ransac_inliers_and_error_band_tied_to_noise():
     sigma, d2, res2, n_res, recall, precision = 0.5, [], 0.0, 0, [], []
     for _ in range(40):
         X, x, R, t, out = pnp_problem(rng, n=100, noise_px=sigma, outlier_ratio=0.3)
-        R1, t1, inl = pnp_ransac(X, x, K_SKEW, threshold=2.0, rng=rng)
+        _res = pnp_ransac(X, x, K_SKEW, threshold_px=2.0, rng=rng)
+        R1, t1, inl = _res.R, _res.t, _res.inliers
         recall.append((inl & ~out).sum() / (~out).sum())
         precision.append((inl & ~out).sum() / inl.sum())
         delta = np.r_[angle_axis_from_rotation(R1 @ R.T), t1 - t]                # in the (w, t) parameters
@@ -178,7 +180,8 @@ def test_pnp_ransac_inliers_and_error_band_tied_to_noise():
 def test_pnp_ransac_agrees_with_opencv_on_its_inliers(rng):
     K = np.array([[800.0, 0.0, 320.0], [0.0, 780.0, 240.0], [0.0, 0.0, 1.0]])
     X, x, R, t, out = pnp_problem(rng, n=150, K=K)
-    R1, t1, inl = pnp_ransac(X, x, K, rng=rng)
+    _res = pnp_ransac(X, x, K, rng=rng)
+    R1, t1, inl = _res.R, _res.t, _res.inliers
     ok, rv, tv = cv2.solvePnP(X[inl], x[inl], K, None, flags=cv2.SOLVEPNP_ITERATIVE)
     assert ok and pose_distance(R1, t1, cv2.Rodrigues(rv)[0], tv.ravel()) < 1e-6   # same least-squares optimum
 
@@ -198,9 +201,9 @@ def test_pnp_ransac_bad_input(rng):
     with pytest.raises(ValueError, match="collinear"):
         pnp_ransac(np.outer(np.arange(20), [0.1, 0.2, 0.3]) + [0, 0, 5], x, K_SKEW, rng=rng)
     with pytest.raises(ValueError, match="rng"):
-        pnp_ransac(X, x, K_SKEW)
+        pnp_ransac(X, x, K_SKEW, rng=None)
     with pytest.raises(ValueError, match="threshold"):
-        pnp_ransac(X, x, K_SKEW, threshold=0.0, rng=rng)
+        pnp_ransac(X, x, K_SKEW, threshold_px=0.0, rng=rng)
     with pytest.raises(ValueError, match="no pose explains"):
         pnp_ransac(X[:6], rng.uniform(0, 640, (6, 2)), K_SKEW, rng=rng)        # nothing but outliers
 
@@ -209,7 +212,8 @@ def test_pnp_ransac_on_synthetic_turntable(rng):
     s = make_scene(300, 8, layout="turntable", noise_px=0.5, outlier_ratio=0.3, rng=rng)
     for i in range(s.n_views):
         vis = s.visible[i]
-        R1, t1, inl = pnp_ransac(s.X[vis], s.x_meas[i, vis], s.K, rng=rng)
+        _res = pnp_ransac(s.X[vis], s.x_meas[i, vis], s.K, rng=rng)
+        R1, t1, inl = _res.R, _res.t, _res.inliers
         good = ~s.outliers[i, vis]
         assert (inl & good).sum() / good.sum() >= 0.97 and (inl & ~good).sum() <= 1
         assert rotation_error_deg(R1, s.R[i]) < 0.5
@@ -222,7 +226,8 @@ def test_pnp_ransac_on_dino(dino, rng):
         out = np.zeros(len(X), bool)
         out[rng.choice(len(X), int(round(0.3 * len(X))), replace=False)] = True
         x[out] = rng.uniform([0, 0], dino.image_size, size=(out.sum(), 2))
-        R1, t1, inl = pnp_ransac(X, x, dino.K, rng=rng)
+        _res = pnp_ransac(X, x, dino.K, rng=rng)
+        R1, t1, inl = _res.R, _res.t, _res.inliers
         assert (inl & ~out).sum() / (~out).sum() >= 0.97 and not (inl & out).any()
         delta = np.r_[angle_axis_from_rotation(R1 @ dino.R[i].T), t1 - dino.t[i]]
         J = pose_jacobian(np.r_[np.zeros(3), dino.t[i]], X[~out], x[~out], dino.K, dino.R[i])
@@ -237,13 +242,15 @@ def test_pnp_ransac_skips_collinear_samples_and_points_behind(rng):
     X = (X_cam - t) @ R
     x = X_cam @ K_SKEW.T
     x = x[:, :2] / x[:, 2:]
-    R1, t1, inl, info = pnp_ransac(X, x, K_SKEW, rng=rng, return_info=True)
+    res = pnp_ransac(X, x, K_SKEW, rng=rng)
+    R1, t1, inl = res.R, res.t, res.inliers
     assert pose_distance(R1, t1, R, t) < 1e-9 and inl.all()
     # points mirrored through the camera centre have the same pixels but lie behind it: outliers
     behind = np.zeros(len(X), bool)
     behind[[3, 10, 27]] = True
     X_b = X.copy()
     X_b[behind] = (-(X_cam[behind] - t) - 2 * t) @ R                  # camera frame: -X_cam
-    R2, t2, inl2 = pnp_ransac(X_b, x, K_SKEW, rng=rng)
+    _res = pnp_ransac(X_b, x, K_SKEW, rng=rng)
+    R2, t2, inl2 = _res.R, _res.t, _res.inliers
     assert pose_distance(R2, t2, R, t) < 1e-9 and np.array_equal(inl2, ~behind)
     assert np.all(np.isinf(reprojection_errors(X_b[behind], x[behind], K_SKEW, R, t)))

@@ -32,11 +32,13 @@ def test_ransac_finds_line_and_outliers(rng):
 def test_ransac_is_deterministic_and_checks_input(rng):
     pts, _ = line_problem(rng)
     run = lambda seed: ransac(len(pts), 2, fit_line(pts), lambda m: np.abs(pts[:, 1] - m[0] * pts[:, 0] - m[1]),
-                              0.04, np.random.default_rng(seed))
+                              0.04, rng=np.random.default_rng(seed))
     assert run(1)[2] == run(1)[2] and np.array_equal(run(1)[1], run(1)[1])
     with pytest.raises(ValueError, match="at least 2"):
-        ransac(1, 2, fit_line(pts), None, 0.1, rng)
+        ransac(1, 2, fit_line(pts), None, 0.1, rng=rng)
     with pytest.raises(ValueError, match="rng"):
-        ransac(10, 2, fit_line(pts), None, 0.1, None)
+        ransac(10, 2, fit_line(pts), None, 0.1, rng=None)
     with pytest.raises(ValueError, match="degenerate"):
-        ransac(10, 2, lambda idx: [], None, 0.1, rng, max_iter=20)
+        ransac(10, 2, lambda idx: [], None, 0.1, rng=rng, max_iter=20)
+    with pytest.raises(ValueError, match="confidence"):
+        ransac(10, 2, fit_line(pts), None, 0.1, rng=rng, confidence=1.0)

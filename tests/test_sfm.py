@@ -1,4 +1,5 @@
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -8,12 +9,19 @@ import pytest
 
 from labutils.geometry import P_from_KRt, project, rotation_from_angle_axis
 from labutils.metrics import ml_residual_bound
-from labutils.sfm import (Reconstruction, bundle_from_cameras, camera_errors, choose_initial_pair, covisibility,
-                          incremental_sfm, read_calibration, read_result_json, read_tracks, triangulate_tracks,
-                          write_tracks)
+from labutils.formats import read_calibration, read_result_json, read_tracks, write_tracks
+from labutils.reconstruction import Reconstruction, camera_errors
+from labutils.sfm import bundle_from_cameras, choose_initial_pair, covisibility, incremental_sfm
+from labutils.triangulation import triangulate_tracks
 from labutils.synthetic import make_scene
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def turntable(noise_px=0.0, outlier_ratio=0.0, seed=0, n_points=300, n_views=24):
@@ -24,7 +32,7 @@ def turntable(noise_px=0.0, outlier_ratio=0.0, seed=0, n_points=300, n_views=24)
 @pytest.fixture(scope="module")
 def clean():
     s = turntable()
-    return s, incremental_sfm(s.tracks, s.K, np.random.default_rng(0))
+    return s, incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(0))
 
 
 # --- the record and its helpers ------------------------------------------------------------------------------
@@ -44,11 +52,7 @@ def test_record_shapes_and_json(clean, tmp_path):
     R, t, X, track = read_result_json(tmp_path / "r.json")
     assert np.array_equal(R, rec.R) and np.array_equal(t, rec.t)        # JSON keeps every bit of a float
     assert np.array_equal(X, rec.X[track]) and len(track) == rec.n_points
-    rec.to_ply(tmp_path / "p.ply")
-    lines = (tmp_path / "p.ply").read_text().splitlines()
-    assert f"element vertex {rec.n_points}" in lines
-    body = np.loadtxt(lines[lines.index("end_header") + 1:])
-    assert np.array_equal(body, rec.X[np.isfinite(rec.X[:, 0])])
+    assert oct((tmp_path / "r.json").stat().st_mode & 0o777) == oct(0o666 & ~_umask())
 
 
 def test_covisibility_counts_shared_tracks(clean):
@@ -69,7 +73,7 @@ def test_triangulate_tracks_drops_outliers_and_ambiguous_tracks():
     x[views, long] += [40.0, -25.0]
     three = np.flatnonzero(seen.sum(0) == 3)[:5]
     x[np.argmax(seen[:, three], axis=0), three] += [40.0, -25.0]  # 2 good of 3: which one is wrong is ambiguous
-    X, used = triangulate_tracks(x, K, s.R, s.t, np.arange(s.n_views), seen, max_error_px=3.0, min_angle_deg=1.0)
+    X, used = triangulate_tracks(x, K, s.R, s.t, np.arange(s.n_views), seen, threshold_px=3.0, min_angle_deg=1.0)
     assert not used[views, long].any() and used[:, long].sum(0).min() >= 3
     assert np.linalg.norm(X[long] - s.X[long], axis=1).max() < 0.01 * np.abs(s.X).max()
     ok = ~np.isin(np.arange(s.n_points), np.r_[long, three])
@@ -88,7 +92,7 @@ def test_initial_pair_needs_a_baseline():
     x_dup = project(P_from_KRt(s.K, R_dup, t_dup), s.X)
     x_dup[~s.visible[v]] = np.nan
     tracks = np.concatenate([s.x_true, x_dup[None]])
-    best, table = choose_initial_pair(tracks, s.K, np.random.default_rng(0), n_candidates=4)
+    best, table = choose_initial_pair(tracks, s.K, rng=np.random.default_rng(0), n_candidates=4)
     assert (table[0]["i"], table[0]["j"]) == (v, s.n_views)             # the most shared tracks...
     assert table[0]["median_angle"] < 0.1 or "failed" in table[0]       # ... but no baseline
     assert {best["i"], best["j"]} != {v, s.n_views} and best["median_angle"] > 3.0
@@ -108,7 +112,7 @@ def test_noise_free_exact(clean):
 def test_noisy_errors_tied_to_noise():
     """σ = 0.5 px: the residual is the ML residual of BA, and the pose errors match BA started from the truth."""
     s = turntable(noise_px=0.5, seed=2)
-    rec = incremental_sfm(s.tracks, s.K, np.random.default_rng(0))
+    rec = incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(0))
     assert rec.registered.all()
     n_obs, n_pts = rec.n_observations, rec.n_points
     rms = np.sqrt(np.nanmean(rec.reprojection_errors(s.tracks) ** 2) / 2)      # per coordinate
@@ -126,19 +130,19 @@ def test_error_scales_with_noise():
     errs = []
     for sigma in (0.25, 1.0):
         s = turntable(noise_px=sigma, seed=3)
-        rec = incremental_sfm(s.tracks, s.K, np.random.default_rng(0))
+        rec = incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(0))
         errs.append(np.mean(camera_errors(rec, s.R, s.t)[0]))
     assert 2.5 < errs[1] / errs[0] < 6.0                                 # linear in σ (ratio 4)
 
 
 def test_outliers_all_views_registered():
     s = turntable(noise_px=0.5, outlier_ratio=0.1, seed=4)
-    rec = incremental_sfm(s.tracks, s.K, np.random.default_rng(0))
+    rec = incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(0))
     assert rec.registered.all()
     # a uniform random pixel lands within 4 px of the right one with probability ~ 50 / (720·576): none kept
     assert (rec.inliers & s.outliers).sum() <= 2
     assert (rec.inliers & ~s.outliers & s.visible).sum() > 0.95 * (~s.outliers & s.visible).sum()
-    clean = incremental_sfm(np.where(s.outliers[..., None], np.nan, s.tracks), s.K, np.random.default_rng(0))
+    clean = incremental_sfm(np.where(s.outliers[..., None], np.nan, s.tracks), s.K, rng=np.random.default_rng(0))
     rot, _ = camera_errors(rec, s.R, s.t)
     rot_clean, _ = camera_errors(clean, s.R, s.t)
     assert abs(rot.mean() / rot_clean.mean() - 1) < 0.1
@@ -150,7 +154,7 @@ def test_per_view_calibration_exact():
     K = np.stack([np.array([[fi, 0.5, 360 + i], [0, 0.98 * fi, 288 - i], [0, 0, 1]]) for i, fi in enumerate(f)])
     x = np.stack([project(P_from_KRt(K[v], s.R[v], s.t[v]), s.X) for v in range(s.n_views)])
     x[~s.visible] = np.nan
-    rec = incremental_sfm(x, K, np.random.default_rng(0))
+    rec = incremental_sfm(x, K, rng=np.random.default_rng(0))
     rot, cen = camera_errors(rec, s.R, s.t)
     assert rec.registered.all() and rot.max() < 1e-4 and cen.max() < 1e-6
 
@@ -160,7 +164,7 @@ def test_unseeable_view_is_left_unregistered():
     x = s.x_true.copy()
     x[5] = np.nan
     x[5, :3] = [[100, 100], [200, 200], [300, 100]]             # sees three tracks: not enough for PnP
-    rec = incremental_sfm(x, s.K, np.random.default_rng(0))
+    rec = incremental_sfm(x, s.K, rng=np.random.default_rng(0))
     assert not rec.registered[5] and rec.registered.sum() == s.n_views - 1
     assert np.isnan(rec.R[5]).all() and not rec.inliers[5].any()
     rot, cen = camera_errors(rec, s.R, s.t)
@@ -170,8 +174,8 @@ def test_unseeable_view_is_left_unregistered():
 
 def test_deterministic():
     s = turntable(noise_px=0.5, outlier_ratio=0.05, seed=7, n_points=200, n_views=16)
-    a = incremental_sfm(s.tracks, s.K, np.random.default_rng(11))
-    b = incremental_sfm(s.tracks, s.K, np.random.default_rng(11))
+    a = incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(11))
+    b = incremental_sfm(s.tracks, s.K, rng=np.random.default_rng(11))
     for name in ("R", "t", "X", "inliers", "registered"):
         assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=name in "RtX"), name
     assert a.order == b.order
@@ -181,28 +185,28 @@ def test_bad_input():
     s = turntable(n_points=100, n_views=12)
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match=r"\(V, T, 2\)"):
-        incremental_sfm(s.tracks[..., :1], s.K, rng)
+        incremental_sfm(s.tracks[..., :1], s.K, rng=rng)
     with pytest.raises(ValueError, match="at least 2 views"):
-        incremental_sfm(s.tracks[:1], s.K, rng)
+        incremental_sfm(s.tracks[:1], s.K, rng=rng)
     bad = s.tracks.copy()
     bad[0, 0] = [np.inf, 1.0]
     with pytest.raises(ValueError, match="infinite"):
-        incremental_sfm(bad, s.K, rng)
+        incremental_sfm(bad, s.K, rng=rng)
     bad[0, 0] = [np.nan, 1.0]
     with pytest.raises(ValueError, match="one NaN"):
-        incremental_sfm(bad, s.K, rng)
+        incremental_sfm(bad, s.K, rng=rng)
     with pytest.raises(ValueError, match=r"\(3, 3\)"):
-        incremental_sfm(s.tracks, np.eye(4), rng)
+        incremental_sfm(s.tracks, np.eye(4), rng=rng)
     with pytest.raises(ValueError, match="singular"):
-        incremental_sfm(s.tracks, np.diag([1.0, 0.0, 1.0]), rng)
+        incremental_sfm(s.tracks, np.diag([1.0, 0.0, 1.0]), rng=rng)
     with pytest.raises(ValueError, match="last row"):
-        incremental_sfm(s.tracks, np.ones((3, 3)), rng)
+        incremental_sfm(s.tracks, np.ones((3, 3)), rng=rng)
     with pytest.raises(ValueError, match="rng"):
-        incremental_sfm(s.tracks, s.K, 0)
+        incremental_sfm(s.tracks, s.K, rng=0)
     with pytest.raises(ValueError, match="shares"):
-        incremental_sfm(s.tracks[:, :5], s.K, rng)
+        incremental_sfm(s.tracks[:, :5], s.K, rng=rng)
     with pytest.raises(ValueError, match="init_pair"):
-        incremental_sfm(s.tracks, s.K, rng, init_pair=(3, 3))
+        incremental_sfm(s.tracks, s.K, rng=rng, init_pair=(3, 3))
     with pytest.raises(ValueError, match="R and t"):
         bundle_from_cameras(s.tracks, s.K, s.R[:2], s.t)
 
@@ -311,9 +315,15 @@ def test_cli_failure_writes_nothing(tmp_path):
     (tmp_path / "tracks.txt").write_text("1 2 3 4\n" * 5)                  # 5 tracks: too few to start
     (tmp_path / "K.txt").write_text("1 0 0\n0 1 0\n0 0 1\n")
     r = _cli("tracks.txt", "K.txt", "--out", "res.json", cwd=tmp_path)
-    assert r.returncode == 1 and "reconstruction failed" in r.stderr
+    assert r.returncode == 2 and "tracks.txt: the reconstruction failed" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     r = _cli("tracks.txt", "K.txt", "--out", "no/such/dir/res.json", cwd=tmp_path)
     assert r.returncode == 2 and "does not exist" in r.stderr
+    (tmp_path / "adir").mkdir()
+    r = _cli("tracks.txt", "K.txt", "--out", "adir", cwd=tmp_path)
+    assert r.returncode == 2 and "is a folder" in r.stderr and "Traceback" not in r.stderr
+    assert list((tmp_path / "adir").iterdir()) == []
+    (tmp_path / "adir").rmdir()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["K.txt", "tracks.txt"]
 
 
@@ -321,14 +331,14 @@ def test_cli_failure_writes_nothing(tmp_path):
 
 
 def test_dino_noise_free(dino):
-    rec = incremental_sfm(dino.x_true, dino.K, np.random.default_rng(0))
+    rec = incremental_sfm(dino.x_true, dino.K, rng=np.random.default_rng(0))
     rot, cen = camera_errors(rec, dino.R, dino.t)
     assert rec.registered.all() and rec.n_points == dino.n_points
     assert rot.max() < 1e-4 and cen.max() < 1e-5
 
 
 def test_dino_real_tracks_match_ba_from_truth(dino):
-    rec = incremental_sfm(dino.tracks, dino.K, np.random.default_rng(0))
+    rec = incremental_sfm(dino.tracks, dino.K, rng=np.random.default_rng(0))
     assert rec.registered.all()
     ref = bundle_from_cameras(dino.tracks, dino.K, dino.R, dino.t)      # the bar: BA started from the truth
     rot, cen = camera_errors(rec, dino.R, dino.t)

@@ -2,11 +2,12 @@
 import numpy as np
 import pytest
 
-from labutils.data import observations
+from labutils.scene import observations
 from labutils.geometry import angle_axis_from_rotation
 from labutils.metrics import align_cameras, pose_errors, rotation_error_deg
 from labutils.synthetic import make_scene
-from labutils import bundle
+from labutils import reprojection as bundle
+from labutils import noise_study as NS
 from labutils import uncertainty as U
 
 
@@ -122,15 +123,15 @@ def test_monte_carlo_ba_from_truth_matches_the_prediction(small):
     rot, cen, rot_raw, cen_raw = [], [], [], []
     C_true = -np.einsum("vji,vj->vi", s.R, s.t)
     for _ in range(n_trials):
-        x_meas, _ = U.noisy_observations(s.x_true, sigma, rng)
-        R, t, _, info = U.ba_from_truth(s, x_meas)
+        x_meas, _ = NS.noisy_observations(s.x_true, sigma, rng=rng)
+        R, t, _, info = NS.ba_from_truth(s, x_meas)
         r, c = pose_errors(R, t, s.R, s.t)
         rot.append(r)
         cen.append(c)
         # BA ran in its default gauge (camera 0 and the 0-1 baseline held): the raw errors
         rot_raw.append(rotation_error_deg(R, s.R))
         cen_raw.append(np.linalg.norm(-np.einsum("vji,vj->vi", R, t) - C_true, axis=1) / pred.scene_size)
-    rot_rms, cen_rms = U.rms_errors(np.array(rot), np.array(cen))
+    rot_rms, cen_rms = NS.rms_errors(np.array(rot), np.array(cen))
     assert abs(rot_rms / pred.rot_rms_deg_all - 1) < 0.10
     assert abs(cen_rms / pred.centre_rms_rel_all - 1) < 0.10
     # the same trials in the fixed gauge match the fixed-gauge prediction (and not the aligned one)
@@ -138,7 +139,7 @@ def test_monte_carlo_ba_from_truth_matches_the_prediction(small):
     cov = U.gauge_pose_covariance(s.R, s.t, s.X, ci, pi, s.K, sigma).reshape(V, 6, V, 6)
     var = np.diagonal(cov.reshape(6 * V, 6 * V)).reshape(V, 6)
     rot_fixed, cen_fixed = np.degrees(np.sqrt(var[:, :3].sum(1).mean())), np.sqrt(var[:, 3:].sum(1).mean()) / pred.scene_size
-    rot_raw_rms, cen_raw_rms = U.rms_errors(np.array(rot_raw), np.array(cen_raw))
+    rot_raw_rms, cen_raw_rms = NS.rms_errors(np.array(rot_raw), np.array(cen_raw))
     # in this gauge the errors are dominated by a few drift modes (n_eff ≈ 5 for rotations, 1.5 for centres): 3 sd of the Monte Carlo
     band = [3 / np.sqrt(2 * n_trials * U.effective_terms(cov[:, k, :, k].reshape(3 * V, 3 * V))) for k in (slice(0, 3), slice(3, 6))]
     assert abs(rot_raw_rms / rot_fixed - 1) < band[0] and abs(cen_raw_rms / cen_fixed - 1) < band[1]
@@ -150,7 +151,7 @@ def test_monte_carlo_ba_from_truth_matches_the_prediction(small):
 
 def test_zero_noise_gives_zero_error(small):
     s, _, _ = small
-    R, t, _, _ = U.ba_from_truth(s, s.x_true)
+    R, t, _, _ = NS.ba_from_truth(s, s.x_true)
     rot, cen = pose_errors(R, t, s.R, s.t)
     assert rot.max() < 1e-6 and cen.max() < 1e-9
 
@@ -158,16 +159,16 @@ def test_zero_noise_gives_zero_error(small):
 def test_errors_grow_linearly_with_sigma(small):
     """One noise draw scaled by σ: the ML errors are linear in σ (log–log slope 1) while σ is small."""
     s, _, _ = small
-    eps, _ = U.noisy_observations(s.x_true, 1.0, np.random.default_rng(3))
+    eps, _ = NS.noisy_observations(s.x_true, 1.0, rng=np.random.default_rng(3))
     eps -= s.x_true
     sigmas = np.array([0.25, 1.0, 4.0])
     rot, cen = [], []
     for sigma in sigmas:
-        R, t, _, _ = U.ba_from_truth(s, s.x_true + sigma * eps)
-        r, c = U.rms_errors(*pose_errors(R, t, s.R, s.t))
+        R, t, _, _ = NS.ba_from_truth(s, s.x_true + sigma * eps)
+        r, c = NS.rms_errors(*pose_errors(R, t, s.R, s.t))
         rot.append(r)
         cen.append(c)
-    assert abs(U.loglog_slope(sigmas, rot) - 1) < 0.1 and abs(U.loglog_slope(sigmas, cen) - 1) < 0.1
+    assert abs(NS.loglog_slope(sigmas, rot) - 1) < 0.1 and abs(NS.loglog_slope(sigmas, cen) - 1) < 0.1
 
 
 def test_robust_steps_resist_outliers(small):
@@ -176,12 +177,12 @@ def test_robust_steps_resist_outliers(small):
     of ~17 effective terms has a relative sd of ~17 %, and 20 % fewer observations cost ~25 %)."""
     s, ci, pi = small
     pred = U.predict_pose_errors(s.R, s.t, s.X, ci, pi, s.K, 1.0)
-    x_meas, out = U.noisy_observations(s.x_true, 1.0, np.random.default_rng(4), outlier_ratio=0.2,
+    x_meas, out = NS.noisy_observations(s.x_true, 1.0, rng=np.random.default_rng(4), outlier_ratio=0.2,
                                        image_size=s.image_size)
     assert 0.1 < out.sum() / s.visible.sum() < 0.3
-    plain = U.rms_errors(*pose_errors(*U.ba_from_truth(s, x_meas)[:2], s.R, s.t))[0]
-    R, t, _, info = U.ba_from_truth(s, x_meas, loss="cauchy", f_scale=2.0, reject_px=5.0)
-    robust = U.rms_errors(*pose_errors(R, t, s.R, s.t))[0]
+    plain = NS.rms_errors(*pose_errors(*NS.ba_from_truth(s, x_meas)[:2], s.R, s.t))[0]
+    R, t, _, info = NS.ba_from_truth(s, x_meas, loss="cauchy", f_scale=2.0, threshold_px=5.0)
+    robust = NS.rms_errors(*pose_errors(R, t, s.R, s.t))[0]
     is_out = out[ci, pi]
     assert plain > 10 * pred.rot_rms_deg_all
     assert not np.any(info["kept"] & is_out) and np.sum(~info["kept"] & ~is_out) < 0.05 * np.sum(~is_out)
@@ -192,7 +193,7 @@ def test_run_noise_study(small):
     s, ci, pi = small
 
     def reconstruct(scene, x_meas, sigma, rng):
-        R, t, _, _ = U.ba_from_truth(scene, x_meas)
+        R, t, _, _ = NS.ba_from_truth(scene, x_meas)
         R[5], t[5] = np.nan, np.nan                       # a view the pipeline failed to register
         return R, t
 
@@ -201,8 +202,8 @@ def test_run_noise_study(small):
             raise ValueError("no initial pair")
         return scene.R, scene.t
 
-    both = U.run_noise_study(s, {"ba": reconstruct, "fragile": fragile}, [0.0, 1.0], {0.0: 1, 1.0: 3},
-                             np.random.default_rng(5))
+    both = NS.run_noise_study(s, {"ba": reconstruct, "fragile": fragile}, [0.0, 1.0], {0.0: 1, 1.0: 3},
+                              rng=np.random.default_rng(5))
     study = both["ba"]
     assert study.rot_deg[1.0].shape == (3, len(s.R)) and len(study.estimates[1.0]) == 3
     assert np.all(np.isnan(study.rot_deg[1.0][:, 5])) and np.all(np.isfinite(np.delete(study.rot_deg[1.0], 5, 1)))
@@ -216,9 +217,9 @@ def test_run_noise_study(small):
     study.rot_deg[1.0][1, :3] = 30.0
     assert study.flag_wrong_basins(pred) == 1 and study.n_ok(1.0) == 2 and "wrong basin" in study.failures[1.0][-1]
     with pytest.raises(ValueError, match="at least one trial"):
-        U.run_noise_study(s, reconstruct, [1.0], 0, np.random.default_rng(5))
+        NS.run_noise_study(s, reconstruct, [1.0], 0, rng=np.random.default_rng(5))
     with pytest.raises(ValueError, match="pipelines"):
-        U.run_noise_study(s, {}, [1.0], 1, np.random.default_rng(5))
+        NS.run_noise_study(s, {}, [1.0], 1, rng=np.random.default_rng(5))
 
 
 def test_dino_prediction(dino):
@@ -259,13 +260,13 @@ def test_bad_input(small):
     with pytest.raises(ValueError, match="not determined"):
         U.predict_pose_errors(s.R, s.t, s.X, ci[keep], pi[keep], s.K)
     with pytest.raises(ValueError, match="rng"):
-        U.noisy_observations(s.x_true, 1.0, 0)
+        NS.noisy_observations(s.x_true, 1.0, rng=0)
     with pytest.raises(ValueError, match="outlier_ratio"):
-        U.noisy_observations(s.x_true, 1.0, np.random.default_rng(0), outlier_ratio=1.5)
+        NS.noisy_observations(s.x_true, 1.0, rng=np.random.default_rng(0), outlier_ratio=1.5)
     with pytest.raises(ValueError, match="image_size"):
-        U.noisy_observations(s.x_true, 1.0, np.random.default_rng(0), outlier_ratio=0.1)
+        NS.noisy_observations(s.x_true, 1.0, rng=np.random.default_rng(0), outlier_ratio=0.1)
     with pytest.raises(ValueError, match="positive"):
-        U.loglog_slope([0.0, 1.0], [1.0, 2.0])
+        NS.loglog_slope([0.0, 1.0], [1.0, 2.0])
 
 
 def test_common_noise_scales_one_pattern(small):
@@ -273,13 +274,13 @@ def test_common_noise_scales_one_pattern(small):
     s, _, _ = small
 
     def ml(scene, x_meas, sigma, rng):
-        return U.ba_from_truth(scene, x_meas)[:2]
+        return NS.ba_from_truth(scene, x_meas)[:2]
 
-    st = U.run_noise_study(s, ml, [0.25, 1.0, 4.0], 2, np.random.default_rng(6), common_noise=True)
+    st = NS.run_noise_study(s, ml, [0.25, 1.0, 4.0], 2, rng=np.random.default_rng(6), common_noise=True)
     per_trial = st.trial_rms("rot")                        # (levels, trials)
     assert per_trial.shape == (3, 2)
     assert np.allclose(per_trial / per_trial[1], np.array([0.25, 1.0, 4.0])[:, None], rtol=0.05)
-    assert abs(U.loglog_slope(st.sigmas, st.rms("centre")) - 1) < 0.05
+    assert abs(NS.loglog_slope(st.sigmas, st.rms("centre")) - 1) < 0.05
 
 
 def test_sfm_reaches_the_ml_optimum_and_beats_no_ba(small):
@@ -289,18 +290,18 @@ def test_sfm_reaches_the_ml_optimum_and_beats_no_ba(small):
     s, _, _ = small
     rng = np.random.default_rng(7)
     for sigma in (0.0, 0.5):
-        x_meas, _ = U.noisy_observations(s.x_true, sigma, rng)
-        rec = incremental_sfm(x_meas, s.K, rng, threshold_px=10.0, init_min_angle_deg=1.0, loss="linear")
-        R, t = U.refine_reconstruction(rec, x_meas, s.K)
+        x_meas, _ = NS.noisy_observations(s.x_true, sigma, rng=rng)
+        rec = incremental_sfm(x_meas, s.K, rng=rng, threshold_px=10.0, init_min_angle_deg=1.0, loss="linear")
+        R, t = NS.refine_reconstruction(rec, x_meas, s.K)
         rot, _ = pose_errors(R, t, s.R, s.t)
         if sigma == 0:
             assert rot.max() < 1e-6
             continue
-        rot_ml, _ = pose_errors(*U.ba_from_truth(s, x_meas)[:2], s.R, s.t)
+        rot_ml, _ = pose_errors(*NS.ba_from_truth(s, x_meas)[:2], s.R, s.t)
         assert np.allclose(rot, rot_ml, rtol=0.02, atol=1e-3 * rot_ml.max())
-        R0, t0, X0 = U.reconstruct_without_ba(x_meas, s.K, rec.order, rng)
+        R0, t0, X0 = NS.reconstruct_without_ba(x_meas, s.K, rec.order, rng=rng)
         ok = np.isfinite(t0[:, 0])
         assert ok.sum() >= 3 and X0.shape == (s.n_points, 3)
-        assert U.rms_errors(*pose_errors(R0[ok], t0[ok], s.R[ok], s.t[ok]))[0] > 2 * U.rms_errors(rot, rot)[0]
+        assert NS.rms_errors(*pose_errors(R0[ok], t0[ok], s.R[ok], s.t[ok]))[0] > 2 * NS.rms_errors(rot, rot)[0]
     with pytest.raises(ValueError, match="order"):
-        U.reconstruct_without_ba(x_meas, s.K, [0, 0, 1], rng)
+        NS.reconstruct_without_ba(x_meas, s.K, [0, 0, 1], rng=rng)
