@@ -215,7 +215,7 @@ def as_fundamental(F, name="F"):
     >>> as_fundamental(np.eye(3))
     Traceback (most recent call last):
     ...
-    ValueError: F does not have rank 2 (singular values [1. 1. 1.] after scaling): enforce rank 2 first (H&Z Sec. 11.1.1)
+    ValueError: F does not have rank 2 (singular values [1. 1. 1.] after scaling): enforce rank 2 first ...
     """
     F = as_matrix(F, name, (3, 3))
     U, s, Vt = np.linalg.svd(F)
@@ -309,7 +309,7 @@ def as_tracks(tracks, name="tracks", min_views=1, min_tracks=0):
     >>> as_tracks(np.full((2, 3, 2), -1.0))
     Traceback (most recent call last):
     ...
-    ValueError: tracks[0, 0] is (-1, -1): mark an unseen observation with NaN, not -1 (labutils.scene.nan_tracks converts a -1-marked array)
+    ValueError: tracks[0, 0] is (-1, -1): mark an unseen observation with NaN, not -1 ...
     """
     x = _as_float_array(tracks, name, "(V, T, 2)")
     if x.ndim != 3 or x.shape[2] != 2:

@@ -105,7 +105,8 @@ def parse_bal(text, where="<string>"):
     head = lines[i].split()
     if len(head) != 3:
         raise _err(where, i + 1, f"the header must be 'n_cameras n_points n_observations'; got {lines[i].strip()!r}")
-    V, M, N = (_parse_int(tok, where, i + 1, name) for tok, name in zip(head, ("n_cameras", "n_points", "n_observations")))
+    V, M, N = (_parse_int(tok, where, i + 1, name)
+               for tok, name in zip(head, ("n_cameras", "n_points", "n_observations")))
     if V < 1 or M < 1 or N < 1:
         raise _err(where, i + 1, f"the counts must be positive; got {V} cameras, {M} points, {N} observations")
     if max(V, M, N) > 10 ** 9:
@@ -124,7 +125,8 @@ def parse_bal(text, where="<string>"):
         idx = np.array([(int(f[0]), int(f[1])) for f in fields], dtype=np.int64).reshape(N, 2)
     except ValueError:
         j = next(j for j, f in enumerate(fields) if not all(_is_int(t) for t in f[:2]))
-        raise _err(where, first_obs + j + 1, f"camera and point indices must be integers; got {obs_lines[j].strip()!r}") from None
+        raise _err(where, first_obs + j + 1,
+                   f"camera and point indices must be integers; got {obs_lines[j].strip()!r}") from None
     except OverflowError:
         j = next(j for j, f in enumerate(fields) if max(abs(int(f[0])), abs(int(f[1]))) > _INT_MAX)
         raise _err(where, first_obs + j + 1, f"an index is too large: {obs_lines[j].strip()!r}") from None
@@ -242,7 +244,8 @@ def check_bal_problem(problem):
                            ("point_indices", problem.point_indices, X.shape[0])):
         a = np.asarray(a)
         if a.shape != (x.shape[0],) or (a.size and a.dtype.kind not in "iu"):
-            raise ValueError(f"{name} must be {x.shape[0]} integers (one per observation); got {a.dtype} shape {a.shape}")
+            raise ValueError(f"{name} must be {x.shape[0]} integers (one per observation); "
+                             f"got {a.dtype} shape {a.shape}")
         bad = np.flatnonzero((a < 0) | (a >= upper))
         if bad.size:
             raise ValueError(f"{name}[{bad[0]}] = {a[bad[0]]} is out of range 0..{upper - 1}")

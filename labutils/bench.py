@@ -97,8 +97,8 @@ def bench_dino(max_iter_scipy=2000, variants=SCIPY_VARIANTS, loss="soft_l1", f_s
     progress(f"dino: lm-schur {w:.2f} s")
     for name, kw in variants.items():
         progress(f"dino: {name} ...")
-        r, w, c = _timed(lambda: bundle_adjust(*args, solver="scipy", loss=loss, f_scale=f_scale,
-                                               max_iter=max_iter_scipy, **kw))
+        r, w, c = _timed(lambda kw=kw: bundle_adjust(*args, solver="scipy", loss=loss, f_scale=f_scale,
+                                                     max_iter=max_iter_scipy, **kw))
         rows.append(_row(r, w, c, variant=name, rel_to_lm=r.loss_cost_final / res.loss_cost_final - 1,
                          speedup_of_lm=round(w / rows[0]["seconds"], 1)))
         progress(f"dino: {name} {w:.2f} s")
@@ -119,7 +119,7 @@ def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
     progress(f"ladybug: lm-schur {w:.2f} s")
     for name, kw in variants.items():
         progress(f"ladybug: {name} ... (minutes)")
-        (_, r), w, c = _timed(lambda: solve_bal(p, solver="scipy", max_iter=max_iter_scipy, **kw))
+        (_, r), w, c = _timed(lambda kw=kw: solve_bal(p, solver="scipy", max_iter=max_iter_scipy, **kw))
         rows.append(_row(r, w, c, variant=name, rel_to_lm=r.cost_final / res.cost_final - 1,
                          speedup_of_lm=round(w / rows[0]["seconds"], 1)))
         progress(f"ladybug: {name} {w:.2f} s")

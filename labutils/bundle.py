@@ -38,10 +38,17 @@ from . import _cli
 from ._blas import single_threaded_blas
 from .bal import BALProblem, format_bal, read_bal
 from .gauge import apply_gauge, gauge_plan
-from .lm_schur import lm_schur
 from .geometry import rotation_from_angle_axis
-from .reprojection import (Rt_from_camera_params, assemble_jacobian, camera_params_from_Rt, check_problem,
-                           jacobian_sparsity, jacobian_structure, project_observations)
+from .lm_schur import lm_schur
+from .reprojection import (
+    Rt_from_camera_params,
+    assemble_jacobian,
+    camera_params_from_Rt,
+    check_problem,
+    jacobian_sparsity,
+    jacobian_structure,
+    project_observations,
+)
 from .robust import LOSSES, SECOND_ORDER_AFTER, robust_cost, scipy_loss
 
 
@@ -367,7 +374,8 @@ def bundle_adjust(R: ArrayLike, t: ArrayLike, X: ArrayLike, camera_indices: Arra
     ((60, 3), True, True)
     """
     cp = camera_params_from_Rt(R, t)
-    return bundle_adjust_params(cp, X, camera_indices, point_indices, points_2d, K, solver=solver, loss=loss, f_scale=f_scale,
+    return bundle_adjust_params(cp, X, camera_indices, point_indices, points_2d, K, solver=solver, loss=loss,
+                                f_scale=f_scale,
                  gauge=gauge, fixed_cameras=fixed_cameras, fixed_points=fixed_points, max_iter=max_iter,
                  tol=tol, verbose=verbose, scipy_jac=scipy_jac, scipy_options=scipy_options)
 

@@ -353,10 +353,12 @@ class NoiseStudy:
                 continue
             row = f"{s:6.2f} {ok:>9} | {np.nanmean(r):10.3g} ± {np.nanstd(r):9.3g} {r_rms:9.3g}"
             if pred:
-                row += f" {pred.rot_rms_deg_all * s:9.3g} {r_rms / (pred.rot_rms_deg_all * s) if s > 0 else np.nan:6.3f}"
+                p = pred.rot_rms_deg_all * s
+                row += f" {p:9.3g} {r_rms / p if s > 0 else np.nan:6.3f}"
             row += f" | {np.nanmean(c):11.3g} ± {np.nanstd(c):10.3g} {c_rms:9.3g}"
             if pred:
-                row += f" {pred.centre_rms_rel_all * s:9.3g} {c_rms / (pred.centre_rms_rel_all * s) if s > 0 else np.nan:6.3f}"
+                p = pred.centre_rms_rel_all * s
+                row += f" {p:9.3g} {c_rms / p if s > 0 else np.nan:6.3f}"
             lines.append(row)
         return "\n".join(lines)
 

@@ -15,7 +15,6 @@ from ._validation import as_calibration, as_count, as_matrix, as_points, as_posi
 from .geometry import right_jacobian_so3, rotation_from_angle_axis
 from .ransac import ransac
 
-
 # --------------------------------------------------------------------------------------------- helpers
 
 def bearings(x: ArrayLike, K: ArrayLike) -> np.ndarray:
@@ -397,7 +396,8 @@ def refine_pose(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, t: Array
         raise ValueError("X is collinear (or all points coincide): the rotation about that line is not determined")
     behind = np.flatnonzero(X @ R0[2] + t0[2] <= 0)
     if behind.size:
-        raise ValueError(f"{behind.size} of the {len(X)} points are behind the starting camera (rows {behind[:5].tolist()})")
+        raise ValueError(f"{behind.size} of the {len(X)} points are behind the starting camera "
+                         f"(rows {behind[:5].tolist()})")
     res = scipy.optimize.least_squares(
         pose_residuals, np.concatenate([np.zeros(3), t0]), jac=pose_jacobian, args=(X, x, K, R0),
         method="lm" if loss == "linear" else "trf", loss=loss, f_scale=f_scale, max_nfev=max_nfev,

@@ -160,7 +160,8 @@ class Scene:
     def summary(self):
         """One line: what this scene is."""
         obs = int(self.visible.sum())
-        extra = f", {np.isfinite(self.tracks[..., 0]).sum()} observations in {self.tracks.shape[1]} extra tracks" if self.tracks is not None else ""
+        extra = "" if self.tracks is None else (f", {np.isfinite(self.tracks[..., 0]).sum()} observations in "
+                                                f"{self.tracks.shape[1]} extra tracks")
         return (f"{self.source} scene '{self.name}': {self.n_views} views, {self.n_points} points, "
                 f"{obs} observations{extra}")
 

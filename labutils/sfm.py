@@ -57,7 +57,8 @@ def covisibility(tracks):
     return seen @ seen.T
 
 
-def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, n_candidates=6, min_tracks=30, min_angle_deg=3.0, threshold_px=4.0,
+def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, n_candidates=6, min_tracks=30,
+                        min_angle_deg=3.0, threshold_px=4.0,
                         confidence=0.999):
     """Pick the initial pair: many shared tracks and a wide enough baseline.
 
@@ -187,7 +188,8 @@ class _State:
         return (self.seen & ~self.rejected & self.triangulated[None]).sum(1)
 
     def centres(self):
-        return camera_center(np.where(self.reg[:, None, None], self.R, np.eye(3)), np.where(self.reg[:, None], self.t, 0))
+        return camera_center(np.where(self.reg[:, None, None], self.R, np.eye(3)),
+                             np.where(self.reg[:, None], self.t, 0))
 
 
 def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter, tol=1e-8):
@@ -268,7 +270,8 @@ def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_ite
     timings["final_triangulation"] = time.perf_counter() - t0
     note(f"final: {n_new} tracks triangulated, {n_bad} observations rejected, {n_drop} points dropped")
     t0 = time.perf_counter()
-    res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
+    res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter,
+                  tol=tol)
     note(f"final BA 1: {_cost_text(res)}")
     for k in range(2, rounds + 2):
         before = st.used()
@@ -276,7 +279,8 @@ def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_ite
         if np.array_equal(before, st.used()):
             note(f"final: the inlier set is stable ({n_bad} observations beyond {threshold_px:g} px left out)")
             break
-        res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
+        res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter,
+                      tol=tol)
         note(f"final BA {k}: {n_bad} observations beyond {threshold_px:g} px left out, {n_drop} points dropped; "
              f"{_cost_text(res)}")
     timings["final_ba"] = time.perf_counter() - t0
@@ -288,7 +292,8 @@ def _result(st, order, timings, log):
                           timings=dict(timings), log=list(log))
 
 
-def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, init_pair=None, threshold_px=4.0, min_angle_deg=1.5, init_min_angle_deg=3.0,
+def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, init_pair=None, threshold_px=4.0,
+                    min_angle_deg=1.5, init_min_angle_deg=3.0,
                     n_init_candidates=6, min_inliers=15, local_ba_views=4, global_ba_growth=1.4, loss="cauchy",
                     f_scale=1.0, ba_max_iter=5, final_max_iter=100, confidence=0.9999, verbose=False):
     """Incremental structure from motion from calibrated tracks (module docstring; H&Z Ch. 18).
@@ -363,7 +368,8 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
     # 1. the initial pair
     t0 = time.perf_counter()
     if init_pair is None:
-        best, table = choose_initial_pair(tracks, Ks, rng=rng, n_candidates=n_init_candidates, min_angle_deg=init_min_angle_deg,
+        best, table = choose_initial_pair(tracks, Ks, rng=rng, n_candidates=n_init_candidates,
+                                          min_angle_deg=init_min_angle_deg,
                                           threshold_px=threshold_px, confidence=confidence)
     else:
         i, j = (int(v) for v in init_pair)
@@ -372,7 +378,8 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
         x1, x2, idx = _pair(tracks, i, j)
         if len(idx) < 8:
             raise ValueError(f"views {i} and {j} share {len(idx)} tracks; at least 8 are needed to start")
-        R, t, X, med = two_view_reconstruction(x1, x2, Ks[i], Ks[j], rng=rng, threshold_px=threshold_px, confidence=confidence)
+        R, t, X, med = two_view_reconstruction(x1, x2, Ks[i], Ks[j], rng=rng, threshold_px=threshold_px,
+                                               confidence=confidence)
         ok = np.isfinite(X[:, 0])
         best = dict(i=i, j=j, R=R, t=t, track=idx[ok], X=X[ok], median_angle=med)
     i, j = best["i"], best["j"]

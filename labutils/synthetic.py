@@ -3,11 +3,9 @@
 Every random choice comes from the ``rng`` argument (a ``numpy.random.Generator``).
 """
 import numpy as np
-
 from numpy.typing import ArrayLike
 
-from ._validation import (as_calibration, as_count, as_fraction, as_positive, as_rng, as_rotations,
-                          as_translations)
+from ._validation import as_calibration, as_count, as_fraction, as_positive, as_rng, as_rotations, as_translations
 from .geometry import P_from_KRt, camera_center, project, rotation_from_angle_axis
 from .scene import Scene
 

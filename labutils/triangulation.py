@@ -103,7 +103,8 @@ def triangulate_multiview(Ps: ArrayLike, xs: ArrayLike) -> np.ndarray:
                          f"got {xs.shape}")
     seen = np.all(np.isfinite(xs), axis=-1)                      # (V, N)
     C = _centres_h(Ps)
-    same = np.minimum(np.linalg.norm(C[:, None] - C[None], axis=-1), np.linalg.norm(C[:, None] + C[None], axis=-1)) < 1e-9
+    same = np.minimum(np.linalg.norm(C[:, None] - C[None], axis=-1),
+                      np.linalg.norm(C[:, None] + C[None], axis=-1)) < 1e-9
     label = np.argmax(same, axis=1)                               # cameras with one centre share a label
     if len(C) >= 2 and np.all(label == label[0]):
         raise ValueError("every camera in Ps has the same centre (no baseline): nothing can be triangulated")
@@ -360,7 +361,8 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     by how many of the track's observations then reproject within ``threshold_px`` in front of the camera
     (the consensus). The observations on which all the largest consensus sets agree are triangulated by
     multi-view DLT and the consensus taken again (twice); a track whose largest consensus sets share fewer
-    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected. Then, while some kept observation reprojects
+    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected. Then,
+    while some kept observation reprojects
     too far, the worst one is dropped and the track triangulated again. A point is accepted when at least
     two observations remain and its triangulation angle is at least ``min_angle_deg``. Trying all pairs
     makes the result depend on the cameras only, not on the order in which views were added.

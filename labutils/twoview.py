@@ -5,7 +5,8 @@ from numpy.typing import ArrayLike
 
 from ._validation import as_calibration, as_points, as_rng
 from .bundle import bundle_adjust
-from .epipolar import essential_from_fundamental, fundamental_ransac, pose_from_essential
+from .epipolar import fundamental_ransac
+from .essential import essential_from_fundamental, pose_from_essential
 from .geometry import camera_center
 from .triangulation import ray_angles_deg, triangulate_tracks
 

@@ -5,7 +5,8 @@ The theory in five lines
 ------------------------
 With Gaussian pixel noise of standard deviation σ on every coordinate, bundle adjustment is the
 maximum-likelihood (ML) estimate and, to first order, its parameter error is
-``δθ = (JᵀJ)⁻ Jᵀ ε`` (for residuals ``r = u(θ) - x`` and measurements ``x = x_true + ε``) with covariance ``σ² (JᵀJ)⁻`` (H&Z Sec. 5.2.2–5.2.3: backward propagation
+``δθ = (JᵀJ)⁻ Jᵀ ε`` (for residuals ``r = u(θ) - x`` and measurements ``x = x_true + ε``) with covariance
+``σ² (JᵀJ)⁻`` (H&Z Sec. 5.2.2–5.2.3: backward propagation
 of covariance, over-parametrisation; J is the reprojection Jacobian at the truth). A reconstruction
 is only defined up to a similarity, so ``JᵀJ`` has a 7-dimensional null space (3 rotations, 3 translations,
 1 scale: the *gauge*, Triggs et al. 2000, Sec. 9) and "the" covariance depends on how the gauge is

@@ -4,11 +4,16 @@ import scipy.sparse as sp
 
 from labutils.bundle import bundle_adjust, bundle_adjust_params
 from labutils.geometry import left_jacobian_so3, rotation_from_angle_axis, skew
-from labutils.reprojection import (Rt_from_camera_params, camera_params_from_Rt, jacobian_sparsity,
-                                   reprojection_jacobian, reprojection_residuals)
+from labutils.metrics import ml_residual_bound, pose_errors
+from labutils.reprojection import (
+    Rt_from_camera_params,
+    camera_params_from_Rt,
+    jacobian_sparsity,
+    reprojection_jacobian,
+    reprojection_residuals,
+)
 from labutils.robust import robust_cost
 from labutils.scene import observations
-from labutils.metrics import ml_residual_bound, pose_errors
 from labutils.synthetic import make_scene
 
 D_BAL = np.diag([1.0, -1.0, -1.0])          # our camera (z forward, y down) -> BAL's (looks down -z, y up)
@@ -83,7 +88,7 @@ def test_left_jacobian_matches_finite_differences(rng):
 
 @pytest.mark.parametrize("model", ["shared K", "per-camera K with skew", "BAL"])
 def test_jacobian_matches_finite_differences(rng, model):
-    for trial in range(3):
+    for _ in range(3):
         if model == "BAL":
             cp, X, ci, pi, x = bal_problem(rng, n_points=15, n_views=3)
             cp[:, :3] += 0.3 * rng.normal(size=(3, 3))          # a random problem, away from the optimum

@@ -3,8 +3,8 @@ import pytest
 
 import labutils
 from labutils.datapath import find_data
-from labutils.scene import nan_tracks, observations, tracks_from_observations
 from labutils.geometry import depths, project
+from labutils.scene import nan_tracks, observations, tracks_from_observations
 from labutils.synthetic import make_scene
 
 

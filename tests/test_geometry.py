@@ -1,8 +1,16 @@
 import numpy as np
 import pytest
 
-from labutils.geometry import (KRt_from_P, P_from_KRt, angle_axis_from_rotation, camera_center, project,
-                               relative_pose, rotation_from_angle_axis, skew)
+from labutils.geometry import (
+    KRt_from_P,
+    P_from_KRt,
+    angle_axis_from_rotation,
+    camera_center,
+    project,
+    relative_pose,
+    rotation_from_angle_axis,
+    skew,
+)
 
 
 def random_rotation(rng):

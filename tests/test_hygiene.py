@@ -24,6 +24,7 @@ def test_notebook_is_stripped_and_checked(path):
     assert any(re.search(r"^\s*assert\b", "".join(c["source"]), re.M) for c in code), \
         f"{path.name} has no assert checkpoint"
     md = "".join("".join(c["source"]) for c in nb["cells"] if c["cell_type"] == "markdown").lower()
-    assert "in this notebook you will" in md and "what we did" in md, f"{path.name}: goals and 'what we did' are missing"
+    assert "in this notebook you will" in md and "what we did" in md, \
+        f"{path.name}: goals and 'what we did' are missing"
     assert "default_rng(" in "".join("".join(c["source"]) for c in code), f"{path.name}: make one seeded rng"
     assert "np.random.seed" not in "".join("".join(c["source"]) for c in code), f"{path.name}: no global RNG"

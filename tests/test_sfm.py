@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from labutils.formats import read_calibration, read_result_json, read_tracks, write_tracks
 from labutils.geometry import P_from_KRt, project, rotation_from_angle_axis
 from labutils.metrics import ml_residual_bound
-from labutils.formats import read_calibration, read_result_json, read_tracks, write_tracks
 from labutils.reconstruction import Reconstruction, camera_errors
 from labutils.sfm import bundle_from_cameras, choose_initial_pair, covisibility, incremental_sfm
-from labutils.triangulation import triangulate_tracks
 from labutils.synthetic import make_scene
+from labutils.triangulation import triangulate_tracks
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -267,7 +267,8 @@ def test_read_calibration_shared_and_per_view(tmp_path):
 
 def _cli(*args, cwd):
     return subprocess.run([sys.executable, "-m", "labutils.sfm", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"})
+                          text=True,
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OPENBLAS_NUM_THREADS": "1"})
 
 
 @pytest.mark.parametrize("per_view", [False, True])

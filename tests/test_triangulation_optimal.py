@@ -42,7 +42,7 @@ def brute_force(F, x1, x2, m=20000):
         v = cost(theta, a, b)
         k = np.argmin(v)
         h = np.pi / m
-        res = minimize_scalar(lambda th: cost(np.array(th), a, b), bounds=(theta[k] - h, theta[k] + h),
+        res = minimize_scalar(lambda th, a=a, b=b: cost(np.array(th), a, b), bounds=(theta[k] - h, theta[k] + h),
                               method="bounded", options=dict(xatol=1e-13))
         out.append(min(res.fun, v[k]))
     return np.array(out)

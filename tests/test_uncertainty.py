@@ -2,13 +2,13 @@
 import numpy as np
 import pytest
 
-from labutils.scene import observations
+from labutils import noise_study as NS
+from labutils import reprojection as bundle
+from labutils import uncertainty as U
 from labutils.geometry import angle_axis_from_rotation
 from labutils.metrics import align_cameras, pose_errors, rotation_error_deg
+from labutils.scene import observations
 from labutils.synthetic import make_scene
-from labutils import reprojection as bundle
-from labutils import noise_study as NS
-from labutils import uncertainty as U
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,8 @@ def test_pose_error_map_matches_finite_differences(small):
     for k in range(6 * V):
         d = np.zeros(6 * V)
         d[k] = h
-        E_num[:, k] = (_aligned_error_vector(cp + d.reshape(V, 6), s) - _aligned_error_vector(cp - d.reshape(V, 6), s)) / (2 * h)
+        E_num[:, k] = (_aligned_error_vector(cp + d.reshape(V, 6), s)
+                       - _aligned_error_vector(cp - d.reshape(V, 6), s)) / (2 * h)
     assert np.abs(E - E_num).max() < 1e-7 * np.abs(E).max()
 
 
@@ -82,7 +83,8 @@ def test_schur_dense_and_a_fixed_gauge_give_the_same_covariance(small):
     # while the covariance in that fixed gauge itself, without the alignment, is a different thing
     D = U.camera_perturbation_map(s.R, s.t)
     raw = np.einsum("vij,vjk,vlk->vil", D, H_inv[:6 * V, :6 * V].reshape(V, 6, V, 6)[np.arange(V), :, np.arange(V)], D)
-    assert abs(np.trace(raw[:, :3, :3], axis1=1, axis2=2).sum() / np.trace(schur.reshape(V, 6, V, 6)[np.arange(V), :3, np.arange(V), :3], axis1=1, axis2=2).sum() - 1) > 0.2
+    schur_rot = schur.reshape(V, 6, V, 6)[np.arange(V), :3, np.arange(V), :3]
+    assert abs(np.trace(raw[:, :3, :3], axis1=1, axis2=2).sum() / np.trace(schur_rot, axis1=1, axis2=2).sum() - 1) > 0.2
 
 
 def test_s_transformation_projects_onto_the_gauge(small):
@@ -138,10 +140,13 @@ def test_monte_carlo_ba_from_truth_matches_the_prediction(small):
     V = len(s.R)
     cov = U.gauge_pose_covariance(s.R, s.t, s.X, ci, pi, s.K, sigma).reshape(V, 6, V, 6)
     var = np.diagonal(cov.reshape(6 * V, 6 * V)).reshape(V, 6)
-    rot_fixed, cen_fixed = np.degrees(np.sqrt(var[:, :3].sum(1).mean())), np.sqrt(var[:, 3:].sum(1).mean()) / pred.scene_size
+    rot_fixed = np.degrees(np.sqrt(var[:, :3].sum(1).mean()))
+    cen_fixed = np.sqrt(var[:, 3:].sum(1).mean()) / pred.scene_size
     rot_raw_rms, cen_raw_rms = NS.rms_errors(np.array(rot_raw), np.array(cen_raw))
-    # in this gauge the errors are dominated by a few drift modes (n_eff ≈ 5 for rotations, 1.5 for centres): 3 sd of the Monte Carlo
-    band = [3 / np.sqrt(2 * n_trials * U.effective_terms(cov[:, k, :, k].reshape(3 * V, 3 * V))) for k in (slice(0, 3), slice(3, 6))]
+    # in this gauge the errors are dominated by a few drift modes (n_eff ≈ 5 for rotations, 1.5 for centres):
+    # 3 sd of the Monte Carlo
+    band = [3 / np.sqrt(2 * n_trials * U.effective_terms(cov[:, k, :, k].reshape(3 * V, 3 * V)))
+            for k in (slice(0, 3), slice(3, 6))]
     assert abs(rot_raw_rms / rot_fixed - 1) < band[0] and abs(cen_raw_rms / cen_fixed - 1) < band[1]
     assert rot_fixed > 1.3 * pred.rot_rms_deg_all and var[0].max() < 1e-20
     # per camera too (each camera's RMS is noisier: 3 terms per trial, so a wider band)

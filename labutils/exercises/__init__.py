@@ -70,7 +70,8 @@ class CheckReport:
         lines = [f"self-check · {self.exercise}: "
                  + ("all cases pass" if self.passed else f"{len(self.hints)} of {len(self.cases)} cases fail")]
         for c in self.cases:
-            lines.append(f"  {'pass' if c.passed else 'FAIL'}  {c.name}" + ("" if c.passed else f"\n        hint: {c.hint}"))
+            hint = "" if c.passed else f"\n        hint: {c.hint}"
+            lines.append(f"  {'pass' if c.passed else 'FAIL'}  {c.name}{hint}")
         return "\n".join(lines)
 
 

@@ -1,0 +1,143 @@
+"""The package's architecture as rules: the import layering (drawn in the README), module size, the public API,
+and the lint — each a test that fails when the code drifts."""
+import ast
+import importlib
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import labutils
+
+ROOT = Path(__file__).resolve().parents[1]
+PKG = ROOT / "labutils"
+
+# The layers, bottom first. A module may import only modules of lower layers, or earlier ones in its own layer.
+# The README draws the same layers (test_readme_draws_the_layers); add a new module where its idea belongs.
+LAYERS = {
+    "foundation": ["_validation", "_cli", "_blas", "datapath", "ransac", "robust"],
+    "geometry": ["geometry"],
+    "records and files": ["metrics", "scene", "formats", "bal"],
+    "data": ["synthetic", "data"],
+    "two views": ["triangulation", "epipolar", "gold_standard", "essential"],
+    "camera pose": ["pnp"],
+    "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
+    "reconstruction": ["twoview", "reconstruction", "sfm"],
+    "precision": ["uncertainty", "noise_study"],
+    "presentation and tools": ["plotting", "bench", "exercises"],
+}
+ORDER = [m for layer in LAYERS.values() for m in layer]
+
+# Modules longer than this hold more than one idea unless listed here with the reason.
+MAX_LINES = 600
+LONG_ON_PURPOSE = {}
+
+
+def _modules():
+    """{module name: [source files]}: the .py files of labutils, a subpackage counted as one module."""
+    mods = {}
+    for f in sorted(PKG.rglob("*.py")):
+        rel = f.relative_to(PKG)
+        if rel.name == "__init__.py" and len(rel.parts) == 1:
+            continue
+        mods.setdefault(rel.parts[0].removesuffix(".py"), []).append(f)
+    return mods
+
+
+def _imports(path):
+    """(line, imported labutils module, at top level?) for every import of a labutils module in ``path``."""
+    tree = ast.parse(path.read_text())
+    top = {id(n) for n in tree.body}
+    depth = len(path.relative_to(PKG).parts) - 1                # 0 for labutils/x.py, 1 for labutils/pkg/x.py
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level == 0 and (node.module or "").split(".")[0] == "labutils":
+                parts = node.module.split(".")[1:]
+                names = [parts[0]] if parts else [a.name for a in node.names]
+            elif node.level > 0:
+                up = node.level - 1 - depth                    # levels above the package root: must be 0
+                parts = (node.module or "").split(".") if node.module else []
+                if up < 0:                                      # inside a subpackage, relative to it
+                    names = [path.relative_to(PKG).parts[0]]
+                else:
+                    names = [parts[0]] if parts and parts[0] else [a.name for a in node.names]
+            else:
+                continue
+            out += [(node.lineno, n, id(node) in top) for n in names]
+        elif isinstance(node, ast.Import):
+            out += [(node.lineno, a.name.split(".")[1] if "." in a.name else "labutils", id(node) in top)
+                    for a in node.names if a.name.split(".")[0] == "labutils"]
+    return out
+
+
+def test_every_module_has_a_layer():
+    mods = set(_modules())
+    assert mods == set(ORDER), f"not in LAYERS: {sorted(mods - set(ORDER))}; gone: {sorted(set(ORDER) - mods)}"
+
+
+def test_imports_flow_one_way():
+    rank = {m: k for k, m in enumerate(ORDER)}
+    problems = []
+    for mod, files in _modules().items():
+        for f in files:
+            for line, target, at_top in _imports(f):
+                where = f"{f.relative_to(ROOT)}:{line}"
+                if target == "labutils":
+                    problems.append(f"{where} imports the package labutils itself (import the module you need)")
+                elif target == mod:
+                    continue                                     # within a subpackage
+                elif target not in rank:
+                    problems.append(f"{where} imports labutils.{target}, which is not in LAYERS")
+                elif rank[target] >= rank[mod]:
+                    problems.append(f"{where}: {mod} imports {target}, which is above it (or a cycle)")
+                elif not at_top:
+                    problems.append(f"{where}: import of {target} inside a function (import at the top)")
+    assert not problems, "\n".join(problems)
+
+
+def test_modules_are_one_idea_in_size():
+    long = {}
+    for mod, files in _modules().items():
+        n = max(len(f.read_text().splitlines()) for f in files)
+        if n > MAX_LINES and mod not in LONG_ON_PURPOSE:
+            long[mod] = n
+    assert not long, f"modules over {MAX_LINES} lines (split them, or say why in LONG_ON_PURPOSE): {long}"
+
+
+def test_readme_draws_the_layers():
+    readme = (ROOT / "README.md").read_text()
+    block = re.search(r"```mermaid\n(.*?)```", readme, re.S)
+    assert block, "the README has no mermaid block drawing the layers"
+    text = block.group(1)
+    for layer, mods in LAYERS.items():
+        sub = re.search(rf'subgraph \w+\["{re.escape(layer)}"\]\n(.*?)\n\s*end', text, re.S)
+        assert sub, f"the README's diagram has no subgraph for the layer '{layer}'"
+        drawn = re.findall(r"[\w.]+", sub.group(1))
+        assert sorted(drawn) == sorted(mods), f"layer '{layer}': README draws {drawn}, LAYERS says {mods}"
+
+
+def test_public_names_resolve():
+    for name in labutils.__all__:
+        assert getattr(labutils, name) is not None
+    with pytest.raises(AttributeError, match="no attribute"):
+        labutils.no_such_name  # noqa: B018
+
+
+def test_command_lines_do_not_warn():
+    """``python -m labutils.X --help`` exits 0 and prints no RuntimeWarning ('found in sys.modules')."""
+    for cmd in ("sfm", "bundle", "bench"):
+        r = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", f"labutils.{cmd}", "--help"],
+                           capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 0 and "usage" in r.stdout and "Warning" not in r.stderr, (cmd, r.stderr)
+
+
+def test_lint():
+    ruff = importlib.util.find_spec("ruff")
+    if ruff is None:
+        pytest.skip("ruff is not installed (pip install -r environment.txt)")
+    r = subprocess.run([sys.executable, "-m", "ruff", "check", "--no-cache", "."], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
