@@ -5,12 +5,23 @@ import numbers
 import numpy as np
 
 
-def _as_float_array(x, name, expected):
+def as_array(x, name, expected):
+    """``x`` as a float array (any shape), or ``ValueError`` naming ``name`` and the ``expected`` shape when it is not
+    numeric (a string, a ragged list).
+
+    >>> as_array([[1, 2], [3]], "x", "(N, 2)")
+    Traceback (most recent call last):
+    ...
+    ValueError: x must be a numeric array of shape (N, 2): ...
+    """
     try:
         a = np.asarray(x, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a numeric array of shape {expected}: {exc}") from None
     return a
+
+
+_as_float_array = as_array
 
 
 def as_points(x, name, dim=2, min_n=1, like=None):
@@ -26,8 +37,9 @@ def as_points(x, name, dim=2, min_n=1, like=None):
         Columns expected (2 for pixels, 3 for world points).
     min_n : int
         Fewest rows accepted.
-    like : ndarray, optional
-        When given, ``x`` must have as many rows as ``like``.
+    like : ndarray or (ndarray, str), optional
+        When given, ``x`` must have as many rows as ``like`` (an array, or an array and its argument's name, which
+        the message then names).
 
     Examples
     --------
@@ -42,9 +54,11 @@ def as_points(x, name, dim=2, min_n=1, like=None):
     if a.ndim != 2 or a.shape[1] != dim:
         hint = " — transposed? points are rows" if a.ndim == 2 and a.shape[0] == dim else ""
         raise ValueError(f"{name} must have shape (N, {dim}) (points as rows); got shape {a.shape}{hint}")
-    if like is not None and a.shape[0] != np.shape(like)[0]:
-        raise ValueError(f"{name} has {a.shape[0]} points but the other point set has {np.shape(like)[0]}: "
-                         "correspondences must pair up row by row")
+    if like is not None:
+        other, other_name = like if isinstance(like, tuple) else (like, "the other point set")
+        if a.shape[0] != np.shape(other)[0]:
+            raise ValueError(f"{name} has {a.shape[0]} points but {other_name} has {np.shape(other)[0]}: "
+                             "correspondences must pair up row by row")
     if a.shape[0] < min_n:
         raise ValueError(f"{name} has {a.shape[0]} points; at least {min_n} are needed")
     if not np.all(np.isfinite(a)):
@@ -94,7 +108,7 @@ def as_rotation(R, name="R", tol=1e-6):
     return as_rotations(as_matrix(R, name, (3, 3))[None], name, tol)[0]
 
 
-def as_rotations(R, name="R", tol=1e-6, n=None):
+def as_rotations(R, name="R", tol=1e-6, n=None, like_name=None):
     """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one.
 
     >>> as_rotations(np.stack([np.eye(3), -np.eye(3)]))
@@ -105,7 +119,8 @@ def as_rotations(R, name="R", tol=1e-6, n=None):
     expected = "(V, 3, 3)" if n is None else f"({n}, 3, 3)"
     a = _as_float_array(R, name, expected)
     if a.ndim != 3 or a.shape[1:] != (3, 3) or (n is not None and a.shape[0] != n):
-        raise ValueError(f"{name} must have shape {expected}; got shape {a.shape}")
+        match = f" to match {like_name}" if like_name and n is not None else ""
+        raise ValueError(f"{name} must have shape {expected}{match}; got shape {a.shape}")
     bad = np.flatnonzero(~np.all(np.isfinite(a), axis=(1, 2)))
     if bad.size:
         who = f"{name}[{bad[0]}]" if len(a) > 1 or n is not None else name
@@ -121,7 +136,7 @@ def as_rotations(R, name="R", tol=1e-6, n=None):
     return a
 
 
-def as_translations(t, name="t", n=None):
+def as_translations(t, name="t", n=None, like_name=None):
     """Return ``t`` as a finite ``(V, 3)`` array (rows are the cameras' translations), or raise ``ValueError``.
 
     A ``(3, V)`` array (one column per camera) is refused with a hint, unless V = 3 makes the two readings
@@ -136,14 +151,16 @@ def as_translations(t, name="t", n=None):
     a = _as_float_array(t, name, expected)
     if a.ndim != 2 or a.shape[1] != 3 or (n is not None and a.shape[0] != n):
         hint = " — transposed?" if a.ndim == 2 and a.shape[0] == 3 and (n is None or a.shape[1] == n) else ""
-        raise ValueError(f"{name} must have shape {expected} (one translation per row); got shape {a.shape}{hint}")
+        match = f" to match the {n} rotations of {like_name}" if like_name and n is not None else ""
+        raise ValueError(f"{name} must have shape {expected} (one translation per row{match}); got shape "
+                         f"{a.shape}{hint}")
     bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
     if bad.size:
         raise ValueError(f"{name} has non-finite entries (NaN or inf) in rows {bad[:5].tolist()}")
     return a
 
 
-def as_calibration(K, name="K", n_views=None):
+def as_calibration(K, name="K", n_views=None, like_name=None):
     """A calibration matrix (or a stack), scaled so that ``K[2, 2] == 1``, or ``ValueError``.
 
     Parameters
@@ -177,7 +194,8 @@ def as_calibration(K, name="K", n_views=None):
     if single and n_views is not None:
         a = np.repeat(a[None], n_views, axis=0)
     elif not single and (a.ndim != 3 or a.shape[1:] != (3, 3) or n_views is None or a.shape[0] != n_views):
-        raise ValueError(f"{name} must have shape {expected}; got shape {a.shape}")
+        match = f" (one per view of {like_name})" if like_name and n_views is not None else ""
+        raise ValueError(f"{name} must have shape {expected}{match}; got shape {a.shape}")
     stack = a.reshape(-1, 3, 3)
     for k, Km in enumerate(stack):
         who = name if len(stack) == 1 or single else f"{name}[{k}]"

@@ -36,6 +36,7 @@ from scipy.optimize import least_squares
 
 from . import _cli
 from ._blas import single_threaded_blas
+from ._validation import as_points
 from .bal import BALProblem, format_bal, read_bal
 from .gauge import apply_gauge, gauge_plan
 from .geometry import rotation_from_angle_axis
@@ -374,6 +375,7 @@ def bundle_adjust(R: ArrayLike, t: ArrayLike, X: ArrayLike, camera_indices: Arra
     ((60, 3), True, True)
     """
     cp = camera_params_from_Rt(R, t)
+    X = as_points(X, "X", dim=3)
     return bundle_adjust_params(cp, X, camera_indices, point_indices, points_2d, K, solver=solver, loss=loss,
                                 f_scale=f_scale,
                  gauge=gauge, fixed_cameras=fixed_cameras, fixed_points=fixed_points, max_iter=max_iter,

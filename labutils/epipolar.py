@@ -135,7 +135,7 @@ def _enforce_rank2(F):
 def check_pair(x1, x2, min_n):
     """Two ``(N, 2)`` arrays of corresponding pixels, N >= ``min_n``, or ``ValueError``."""
     x1 = as_points(x1, "x1", min_n=min_n)
-    x2 = as_points(x2, "x2", min_n=min_n, like=x1)
+    x2 = as_points(x2, "x2", min_n=min_n, like=(x1, "x1"))
     return x1, x2
 
 
@@ -321,7 +321,7 @@ def fundamental_7point(x1: ArrayLike, x2: ArrayLike) -> list:
     (True, True)
     """
     x1 = as_points(x1, "x1")
-    x2 = as_points(x2, "x2", like=x1)
+    x2 = as_points(x2, "x2", like=(x1, "x1"))
     if x1.shape[0] != 7:
         raise ValueError(f"the 7-point solver needs exactly 7 correspondences; got {x1.shape[0]}")
     return _seven_point(x1, x2)

@@ -105,7 +105,7 @@ def gauge_basis(R: ArrayLike, t: ArrayLike, X: ArrayLike) -> np.ndarray:
     (84, 7)
     """
     R = as_rotations(R, "R")
-    t = as_translations(t, "t", n=len(R))
+    t = as_translations(t, "t", n=len(R), like_name="R")
     X = as_points(X, "X", dim=3)
     V, M = len(R), len(X)
     Jl = left_jacobian_so3(angle_axis_from_rotation(R))

@@ -7,7 +7,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike
 
-from ._validation import as_matrix, as_points, as_rotation, as_rotations
+from ._validation import as_array, as_matrix, as_points, as_rotation, as_rotations
 
 
 def homogeneous(x: ArrayLike) -> np.ndarray:
@@ -17,25 +17,31 @@ def homogeneous(x: ArrayLike) -> np.ndarray:
     array([[0., 0., 1.],
            [0., 0., 1.]])
     """
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 2:
-        raise ValueError(f"x must have shape (N, d) (points as rows); got shape {x.shape}")
+    x = as_array(x, "x", "(N, 2) or (N, 3)")
+    if x.ndim != 2 or x.shape[1] not in (2, 3):
+        raise ValueError(f"x must have shape (N, 2) or (N, 3) (points as rows); got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("x has non-finite coordinates (NaN or inf)")
     return np.hstack([x, np.ones((x.shape[0], 1))])
 
 
 def dehomogeneous(x_h: ArrayLike) -> np.ndarray:
     """Divide by the last column and drop it: ``(N, d + 1) -> (N, d)``.
 
-    A point at infinity (last coordinate 0) gives ``inf``/NaN coordinates: check with ``np.isfinite``.
+    A point at infinity (last coordinate 0) has no finite coordinates: ``ValueError`` names its rows.
 
     >>> dehomogeneous(np.array([[2., 4., 2.]]))
     array([[1., 2.]])
     """
-    x_h = np.asarray(x_h, dtype=float)
-    if x_h.ndim != 2 or x_h.shape[1] < 2:
-        raise ValueError(f"x_h must have shape (N, d + 1) with d >= 1 (points as rows); got shape {x_h.shape}")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return x_h[:, :-1] / x_h[:, -1:]
+    x_h = as_array(x_h, "x_h", "(N, 3) or (N, 4)")
+    if x_h.ndim != 2 or x_h.shape[1] not in (3, 4):
+        raise ValueError(f"x_h must have shape (N, 3) or (N, 4) (homogeneous points as rows); got shape {x_h.shape}")
+    if not np.all(np.isfinite(x_h)):
+        raise ValueError("x_h has non-finite coordinates (NaN or inf)")
+    inf = np.flatnonzero(x_h[:, -1] == 0)
+    if inf.size:
+        raise ValueError(f"x_h rows {inf[:5].tolist()} have last coordinate 0: points at infinity")
+    return x_h[:, :-1] / x_h[:, -1:]
 
 
 def skew(v: ArrayLike) -> np.ndarray:
@@ -69,14 +75,13 @@ def _aa_coefficients(theta):
 
 def _angle_axis_stack(w, name):
     """``w`` as a finite ``(n, 3)`` array and whether it was a single ``(3,)`` vector."""
-    w = np.asarray(w, dtype=float)
-    if w.shape == (3,):
-        return w[None], True
-    if w.ndim != 2 or w.shape[1] != 3:
+    w = as_array(w, name, "(3,) or (V, 3)")
+    single = w.shape == (3,)
+    if not single and (w.ndim != 2 or w.shape[1] != 3):
         raise ValueError(f"{name} must have shape (3,) or (V, 3) (angle-axis vectors as rows); got shape {w.shape}")
     if not np.all(np.isfinite(w)):
         raise ValueError(f"{name} has non-finite entries (NaN or inf)")
-    return w, False
+    return (w[None], True) if single else (w, False)
 
 
 def rotation_from_angle_axis(w: ArrayLike) -> np.ndarray:
@@ -136,7 +141,7 @@ def angle_axis_from_rotation(R: ArrayLike) -> np.ndarray:
     ...
     ValueError: R is not a rotation matrix (orthonormal with det +1): ...
     """
-    R = np.asarray(R, dtype=float)
+    R = as_array(R, "R", "(3, 3) or (V, 3, 3)")
     single = R.shape == (3, 3)
     Rs = as_rotations(R[None] if single else R, "R")
     out = np.empty((len(Rs), 3))
@@ -200,8 +205,9 @@ def right_jacobian_so3(w: ArrayLike) -> np.ndarray:
     >>> bool(np.allclose(right_jacobian_so3(w), left_jacobian_so3(w).T))
     True
     """
-    J = left_jacobian_so3(-np.asarray(w, dtype=float))
-    return J
+    w, single = _angle_axis_stack(w, "w")
+    J = left_jacobian_so3(-w)
+    return J[0] if single else J
 
 
 def P_from_KRt(K: ArrayLike, R: ArrayLike, t: ArrayLike) -> np.ndarray:
@@ -294,7 +300,9 @@ def camera_center(R: ArrayLike, t: ArrayLike) -> np.ndarray:
     >>> camera_center(np.stack([np.eye(3)] * 2), np.ones((2, 3))).shape
     (2, 3)
     """
-    R, t = np.asarray(R, dtype=float), np.asarray(t, dtype=float)
+    R, t = as_array(R, "R", "(3, 3) or (V, 3, 3)"), as_array(t, "t", "(3,) or (V, 3)")
+    if np.isinf(R).any() or np.isinf(t).any():
+        raise ValueError("R and t must not hold inf (NaN marks a camera that is not there)")
     if R.shape == (3, 3) and t.shape == (3,):
         return -R.T @ t
     if R.ndim != 3 or R.shape[1:] != (3, 3) or t.shape != (R.shape[0], 3):

@@ -3,13 +3,13 @@ theoretical residual of a maximum-likelihood estimate."""
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_points, as_positive, as_rotations, as_translations, as_vector3
+from ._validation import as_array, as_count, as_points, as_positive, as_rotations, as_translations, as_vector3
 from .geometry import camera_center
 
 
 def _rotation_stack(R, name):
     """``R`` of shape (..., 3, 3) checked as rotations; returns the checked array with its shape kept."""
-    a = np.asarray(R, dtype=float)
+    a = as_array(R, name, "(3, 3) or (..., 3, 3)")
     if a.ndim < 2 or a.shape[-2:] != (3, 3):
         raise ValueError(f"{name} must have shape (3, 3) or (..., 3, 3); got shape {a.shape}")
     as_rotations(a.reshape(-1, 3, 3), name)
@@ -70,7 +70,7 @@ def align_similarity(src: ArrayLike, dst: ArrayLike) -> tuple:
     (2.0, True, True)
     """
     src = as_points(src, "src", dim=3, min_n=3)
-    dst = as_points(dst, "dst", dim=3, min_n=3, like=src)
+    dst = as_points(dst, "dst", dim=3, min_n=3, like=(src, "src"))
     mu_s, mu_d = src.mean(0), dst.mean(0)
     A, B = src - mu_s, dst - mu_d
     var_s = (A ** 2).sum() / len(A)
@@ -101,9 +101,9 @@ def align_cameras(R_est: ArrayLike, t_est: ArrayLike, R_true: ArrayLike, t_true:
         The similarity ``X_true ≈ s R X_est + t``; apply it to points with :func:`apply_similarity`.
     """
     R_est = as_rotations(R_est, "R_est")
-    R_true = as_rotations(R_true, "R_true", n=len(R_est))
-    t_est = as_translations(t_est, "t_est", n=len(R_est))
-    t_true = as_translations(t_true, "t_true", n=len(R_est))
+    R_true = as_rotations(R_true, "R_true", n=len(R_est), like_name="R_est")
+    t_est = as_translations(t_est, "t_est", n=len(R_est), like_name="R_est")
+    t_true = as_translations(t_true, "t_true", n=len(R_est), like_name="R_est")
     C_est = camera_center(R_est, t_est)
     s, Rs, ts = align_similarity(C_est, camera_center(R_true, t_true))
     R_al = R_est @ Rs.T
@@ -152,6 +152,7 @@ def ml_residual_bound(sigma: float, n_residuals: int, n_params: int) -> float:
     True
     """
     sigma = as_positive(sigma, "sigma", allow_zero=True)
+    n_residuals, n_params = as_count(n_residuals, "n_residuals", 1), as_count(n_params, "n_params", 0)
     if n_params >= n_residuals:
         raise ValueError(f"need more residuals ({n_residuals}) than free parameters ({n_params})")
     return float(sigma * np.sqrt(1.0 - n_params / n_residuals))
@@ -179,7 +180,7 @@ def up_to_sign_scale(A: ArrayLike, B: ArrayLike) -> float:
     >>> up_to_sign_scale([[1.0, 2.0]], [[-2.0, -4.0]])
     0.0
     """
-    A, B = np.asarray(A, float), np.asarray(B, float)
+    A, B = as_array(A, "A", "(any)"), as_array(B, "B", "(any)")
     if A.shape != B.shape:
         raise ValueError(f"A and B must have the same shape; got {A.shape} and {B.shape}")
     nA, nB = np.linalg.norm(A), np.linalg.norm(B)

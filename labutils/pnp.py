@@ -63,7 +63,7 @@ def reprojection_errors(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, 
     array([ 5., inf])
     """
     X = as_points(X, "X", dim=3)
-    x = as_points(x, "x", like=X)
+    x = as_points(x, "x", like=(X, "X"))
     K, R, t = as_calibration(K), as_rotation(R), as_matrix(t, "t", (3,))
     u = (X @ R.T + t) @ K.T
     z = u[:, 2]
@@ -152,7 +152,7 @@ def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     True
     """
     X = as_points(X, "X", dim=3, min_n=3)
-    y = as_points(y, "y", dim=3, like=X)
+    y = as_points(y, "y", dim=3, like=(X, "X"))
     if len(X) != 3:
         raise ValueError(f"P3P takes exactly 3 points; got {len(X)}")
     n = np.linalg.norm(y, axis=1)
@@ -281,7 +281,7 @@ def p3p(X: ArrayLike, x: ArrayLike, K: ArrayLike) -> list:
     True
     """
     X = as_points(X, "X", dim=3)
-    x = as_points(x, "x", like=X)
+    x = as_points(x, "x", like=(X, "X"))
     if len(X) != 3:
         raise ValueError(f"P3P takes exactly 3 points; got {len(X)}")
     return p3p_bearings(X, bearings(x, K))
@@ -384,7 +384,7 @@ def refine_pose(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, t: Array
     True
     """
     X = as_points(X, "X", dim=3, min_n=3)
-    x = as_points(x, "x", like=X)
+    x = as_points(x, "x", like=(X, "X"))
     K = as_calibration(K)
     R0 = as_rotation(R, "R")
     t0 = as_matrix(t, "t", (3,))
@@ -491,7 +491,7 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     (True, 25, True)
     """
     X = as_points(X, "X", dim=3, min_n=4)
-    x = as_points(x, "x", like=X, min_n=4)
+    x = as_points(x, "x", like=(X, "X"), min_n=4)
     K = as_calibration(K)
     as_rng(rng)
     threshold_px = as_positive(threshold_px, "threshold_px")

@@ -7,6 +7,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._cli import write_atomically
+from ._validation import as_array, as_rotations, as_translations
 from .geometry import camera_center
 from .metrics import align_cameras, apply_similarity, pose_errors
 
@@ -161,6 +162,9 @@ def camera_errors(rec: "Reconstruction", R_true: ArrayLike, t_true: ArrayLike) -
     reg = np.asarray(rec.registered, bool)
     if reg.sum() < 3:
         raise ValueError(f"need at least 3 registered views to align; got {reg.sum()}")
+    V = reg.size
+    R_true = as_rotations(as_array(R_true, "R_true", f"({V}, 3, 3)"), "R_true", n=V)
+    t_true = as_translations(t_true, "t_true", n=V)
     rot, cen = np.full(reg.shape, np.nan), np.full(reg.shape, np.nan)
     rot[reg], cen[reg] = pose_errors(rec.R[reg], rec.t[reg], np.asarray(R_true, float)[reg],
                                      np.asarray(t_true, float)[reg])

@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
-from ._validation import as_calibration, as_points, as_rotations, as_translations
+from ._validation import as_array, as_calibration, as_count, as_points, as_rotations, as_translations
 from .geometry import angle_axis_from_rotation, left_jacobian_so3, rotation_from_angle_axis
 
 
@@ -40,10 +40,10 @@ def camera_params_from_Rt(R: ArrayLike, t: ArrayLike) -> np.ndarray:
     >>> camera_params_from_Rt(np.stack([np.eye(3)] * 4), np.ones((3, 4)))
     Traceback (most recent call last):
     ...
-    ValueError: t must have shape (4, 3) (one translation per row); got shape (3, 4) — transposed?
+    ValueError: t must have shape (4, 3) (one translation per row to match the 4 rotations of R); got shape ...
     """
     R = as_rotations(R, "R")
-    t = as_translations(t, "t", n=len(R))
+    t = as_translations(t, "t", n=len(R), like_name="R")
     return np.hstack([angle_axis_from_rotation(R) if len(R) else np.zeros((0, 3)), t])
 
 
@@ -53,7 +53,7 @@ def Rt_from_camera_params(camera_params: ArrayLike) -> tuple:
     >>> R, t = Rt_from_camera_params(np.zeros((2, 6))); R.shape, t.shape
     ((2, 3, 3), (2, 3))
     """
-    cp = np.asarray(camera_params, float)
+    cp = as_array(camera_params, "camera_params", "(V, 6) or (V, 9)")
     if cp.ndim != 2 or cp.shape[1] not in (6, 9):
         raise ValueError(f"camera_params must have shape (V, 6) or (V, 9); got {cp.shape}")
     if not np.all(np.isfinite(cp)):
@@ -61,12 +61,15 @@ def Rt_from_camera_params(camera_params: ArrayLike) -> tuple:
     return rotation_from_angle_axis(cp[:, :3]), cp[:, 3:6].copy()
 
 
-def as_indices(a, name, n_obs, upper, what):
+def as_indices(a, name, n_obs, upper, what, *, upper_name=None):
+    """``a`` as a 1-D int64 array of indices in ``0..upper - 1`` (of ``what``s, held by ``upper_name``), with
+    ``n_obs`` entries (those of ``camera_indices``) when given, or ``ValueError`` naming the problem."""
     a = np.asarray(a)
     if a.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array of integers; got shape {a.shape}")
     if n_obs is not None and a.shape[0] != n_obs:
-        raise ValueError(f"{name} has {a.shape[0]} entries but there are {n_obs} observations")
+        raise ValueError(f"{name} has {a.shape[0]} entries but camera_indices has {n_obs}: one entry of each per "
+                         "observation")
     if a.size and a.dtype.kind not in "iu":
         af = a.astype(float)
         if not np.all(np.isfinite(af)) or np.any(af != np.round(af)):
@@ -75,8 +78,9 @@ def as_indices(a, name, n_obs, upper, what):
     a = a.astype(np.int64)
     bad = np.flatnonzero((a < 0) | (a >= upper))
     if bad.size:
+        held = f" ({upper_name} has {upper})" if upper_name else ""
         raise ValueError(f"{name}[{int(bad[0])}] = {int(a[bad[0]])} indexes a missing {what}: "
-                         f"there are {upper} {what}s (valid indices 0..{upper - 1}); "
+                         f"there are {upper} {what}s{held}, valid indices 0..{upper - 1}; "
                          f"{bad.size} observation(s) are out of range")
     return a
 
@@ -106,13 +110,14 @@ def check_problem(camera_params, points_3d, camera_indices, point_indices, point
         raise ValueError(f"camera_params has non-finite values (NaN or inf) for camera(s) {bad[:5].tolist()}")
     X = as_points(points_3d, "points_3d", dim=3)
     V, M = cp.shape[0], X.shape[0]
-    ci = as_indices(camera_indices, "camera_indices", None, V, "camera")
-    pi = as_indices(point_indices, "point_indices", ci.shape[0], M, "point")
-    x = as_points(points_2d, "points_2d", dim=2, like=ci) if need_2d else None
+    ci = as_indices(camera_indices, "camera_indices", None, V, "camera", upper_name="camera_params")
+    pi = as_indices(point_indices, "point_indices", ci.shape[0], M, "point", upper_name="points_3d")
+    x = as_points(points_2d, "points_2d", dim=2, like=(ci, "camera_indices")) if need_2d else None
     Ks = check_calibrations(K, V, cp.shape[1])
     return cp, X, ci, pi, x, Ks
 
 
+@np.errstate(divide="ignore", invalid="ignore")       # depth 0 gives inf: the callers refuse it
 def project_observations(cp, X, ci, pi, Ks, jac=False):
     """Predicted pixels ``(n, 2)`` and, if ``jac``, the blocks ``Jc (n, 2, k)`` and ``Jp (n, 2, 3)``.
 
@@ -281,9 +286,8 @@ def jacobian_sparsity(n_cameras: int, n_points: int, camera_indices: ArrayLike, 
     >>> A.shape, A.nnz, A[0].toarray().ravel().tolist()
     ((6, 21), 54, [1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 0])
     """
-    if int(camera_block) != camera_block or camera_block < 1:
-        raise ValueError(f"camera_block must be a positive integer; got {camera_block}")
-    k = int(camera_block)
+    k = as_count(camera_block, "camera_block", 1)
+    n_cameras, n_points = as_count(n_cameras, "n_cameras", 1), as_count(n_points, "n_points", 1)
     ci = as_indices(camera_indices, "camera_indices", None, int(n_cameras), "camera")
     pi = as_indices(point_indices, "point_indices", ci.shape[0], int(n_points), "point")
     cols = jacobian_structure(ci, pi, int(n_cameras), int(n_points), k)

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import _cli
-from ._validation import as_calibration, as_positive, as_rng, as_rotations, as_tracks
+from ._validation import as_array, as_calibration, as_positive, as_rng, as_rotations, as_tracks
 from .bundle import bundle_adjust
 from .formats import ply_text, read_calibration, read_tracks
 from .geometry import camera_center
@@ -497,7 +497,9 @@ def bundle_from_cameras(tracks, K, R, t, *, threshold_px=4.0, min_angle_deg=1.5,
     tracks = as_tracks(tracks, min_views=2)
     V = tracks.shape[0]
     Ks = as_calibration(K, "K", n_views=V)
-    R, t = np.array(R, float), np.array(t, float)
+    R, t = as_array(R, "R", f"({V}, 3, 3)").copy(), as_array(t, "t", f"({V}, 3)").copy()
+    if np.isinf(R).any() or np.isinf(t).any():
+        raise ValueError("R and t must not hold inf (a NaN row leaves a camera out)")
     if R.shape != (V, 3, 3) or t.shape != (V, 3):
         raise ValueError(f"R and t must have shapes ({V}, 3, 3) and ({V}, 3) (NaN rows for cameras to leave out); "
                          f"got {R.shape} and {t.shape}" + (" — t transposed?" if t.shape == (3, V) else ""))

@@ -197,7 +197,7 @@ def perturb_cameras(R: ArrayLike, t: ArrayLike, *, rng: np.random.Generator, rot
     """
     as_rng(rng)
     R = as_rotations(R, "R")
-    t = as_translations(t, "t", n=len(R))
+    t = as_translations(t, "t", n=len(R), like_name="R")
     rot_deg = as_positive(rot_deg, "rot_deg", allow_zero=True)
     rel_shift = as_positive(rel_shift, "rel_shift", allow_zero=True)
     C = camera_center(R, t)

@@ -5,7 +5,17 @@ outliers that structure from motion uses.
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_calibration, as_fundamental, as_matrix, as_points, as_rotations, as_tracks, as_translations
+from ._validation import (
+    as_array,
+    as_calibration,
+    as_fundamental,
+    as_matrix,
+    as_points,
+    as_positive,
+    as_rotations,
+    as_tracks,
+    as_translations,
+)
 from .geometry import camera_center
 
 
@@ -45,7 +55,7 @@ def triangulate(P1: ArrayLike, P2: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> n
     """
     P1, P2 = as_matrix(P1, "P1", (3, 4)), as_matrix(P2, "P2", (3, 4))
     x1 = as_points(x1, "x1")
-    x2 = as_points(x2, "x2", like=x1)
+    x2 = as_points(x2, "x2", like=(x1, "x1"))
     C = _centres_h(np.stack([P1, P2]))
     if _same_centre(C[0], C[1]):
         raise ValueError("P1 and P2 have the same centre (the same camera, or a pure rotation): no baseline, "
@@ -92,14 +102,14 @@ def triangulate_multiview(Ps: ArrayLike, xs: ArrayLike) -> np.ndarray:
     >>> np.round(triangulate_multiview(Ps, xs), 9)
     array([[1. , 0.5, 5. ]])
     """
-    Ps = np.asarray(Ps, dtype=float)
+    Ps = as_array(Ps, "Ps", "(V, 3, 4)")
     if Ps.ndim != 3 or Ps.shape[1:] != (3, 4):
         raise ValueError(f"Ps must have shape (V, 3, 4); got {Ps.shape}")
     if not np.all(np.isfinite(Ps)):
         raise ValueError("Ps has non-finite entries")
     xs = as_tracks(xs, "xs")
     if xs.shape[0] != Ps.shape[0]:
-        raise ValueError(f"xs must have shape (V, N, 2) with V = {Ps.shape[0]} (one row of pixels per camera); "
+        raise ValueError(f"xs must have shape (V, N, 2) with V = {Ps.shape[0]} (one row of pixels per camera of Ps); "
                          f"got {xs.shape}")
     seen = np.all(np.isfinite(xs), axis=-1)                      # (V, N)
     C = _centres_h(Ps)
@@ -208,7 +218,7 @@ def triangulate_optimal(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> tuple:
     """
     F, e1, e2 = as_fundamental(F)
     x1 = as_points(x1, "x1")
-    x2 = as_points(x2, "x2", like=x1)
+    x2 = as_points(x2, "x2", like=(x1, "x1"))
     n = x1.shape[0]
     # one common isotropic scale for both images keeps the polynomial well conditioned and the
     # minimiser unchanged (the cost is a sum of squared distances, scaled by the same factor)
@@ -305,7 +315,7 @@ def fundamental_residual(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> float:
     0.7071067811865476
     """
     x1 = as_points(x1, "x1")
-    x2 = as_points(x2, "x2", like=x1)
+    x2 = as_points(x2, "x2", like=(x1, "x1"))
     x1_hat, x2_hat = triangulate_optimal(F, x1, x2)
     return float(np.sqrt((((x1 - x1_hat) ** 2).sum() + ((x2 - x2_hat) ** 2).sum()) / (4 * x1.shape[0])))
 
@@ -399,26 +409,30 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     """
     tracks = as_tracks(tracks)
     V, N = tracks.shape[:2]
-    K = as_calibration(K, "K", n_views=V)
-    R, t = np.asarray(R, float), np.asarray(t, float)
-    if R.shape != (V, 3, 3) or t.shape != (V, 3):
-        raise ValueError(f"R and t must have shapes ({V}, 3, 3) and ({V}, 3) (NaN rows for views not used); "
-                         f"got {R.shape} and {t.shape}")
+    K = as_calibration(K, "K", n_views=V, like_name="tracks")
+    R, t = as_array(R, "R", f"({V}, 3, 3)"), as_array(t, "t", f"({V}, 3)")
+    if R.shape != (V, 3, 3):
+        raise ValueError(f"R must have shape ({V}, 3, 3) (NaN for views not used); got {R.shape}")
+    if t.shape != (V, 3):
+        raise ValueError(f"t must have shape ({V}, 3) (NaN for views not used); got {t.shape}")
     views = np.asarray(views)
     if views.ndim != 1 or (views.size and (views.dtype.kind not in "iu" or views.min() < 0 or views.max() >= V)):
         raise ValueError(f"views must be a 1-D array of view indices in 0..{V - 1}; got {views!r}")
+    if np.unique(views).size < 2:
+        raise ValueError(f"views must list at least two different views to triangulate from; got {views.tolist()}")
     views = views.astype(int)
     as_rotations(R[views], "R[views]")
     as_translations(t[views], "t[views]")
-    mask = np.asarray(mask, bool)
-    if mask.shape != (V, N):
-        raise ValueError(f"mask must have shape ({V}, {N}) like tracks[..., 0]; got {mask.shape}")
-    if not (np.isfinite(threshold_px) and threshold_px > 0) and threshold_px != np.inf:
-        raise ValueError(f"threshold_px must be a positive number of pixels (or inf); got {threshold_px}")
+    mask = as_array(mask, "mask", f"({V}, {N})")
+    if mask.shape != (V, N) or not np.all((mask == 0) | (mask == 1)):
+        raise ValueError(f"mask must be a boolean array of shape ({V}, {N}) like tracks[..., 0]; got {mask.shape}")
+    mask = mask.astype(bool)
+    threshold_px = as_positive(threshold_px, "threshold_px", allow_inf=True)
+    min_angle_deg = as_positive(min_angle_deg, "min_angle_deg", allow_zero=True)
     use = np.zeros((V, N), bool)
     use[views] = mask[views] & np.all(np.isfinite(tracks[views]), axis=-1)
     X = np.full((N, 3), np.nan)
-    if N == 0 or views.size < 2:
+    if N == 0:
         return X, np.zeros((V, N), bool)
     Ps = np.zeros((V, 3, 4))
     Ps[views] = _camera_matrices(K, R, t, views)           # K33 = 1: q_z has the sign of the depth

@@ -45,7 +45,7 @@ def two_view_reconstruction(x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: Arr
         Median triangulation angle (degrees) of the kept points (0 when none is kept).
     """
     x1 = as_points(x1, "x1", min_n=8)
-    x2 = as_points(x2, "x2", min_n=8, like=x1)
+    x2 = as_points(x2, "x2", min_n=8, like=(x1, "x1"))
     K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
     as_rng(rng)
     F, inl = fundamental_ransac(x1, x2, threshold_px=threshold_px, rng=rng, confidence=confidence)

@@ -31,27 +31,23 @@ import scipy.sparse as sp
 from ._validation import as_calibration, as_points, as_positive, as_rotations, as_translations
 from .gauge import gauge_basis
 from .geometry import angle_axis_from_rotation, camera_center, left_jacobian_so3, skew
-from .reprojection import camera_params_from_Rt, reprojection_jacobian
+from .reprojection import as_indices, camera_params_from_Rt, reprojection_jacobian
 
 
 # --------------------------------------------------------------------------------------------- checks
 def _check_Rt(R, t):
     R = as_rotations(R, "R")
-    t = as_translations(t, "t", n=len(R))
+    t = as_translations(t, "t", n=len(R), like_name="R")
     if R.shape[0] < 3:
         raise ValueError(f"need at least 3 cameras to align centres by a similarity; got {R.shape[0]}")
     return R, t
 
 
 def _check_observations(camera_indices, point_indices, n_cameras, n_points):
-    ci = np.asarray(camera_indices)
-    pi = np.asarray(point_indices)
-    if ci.ndim != 1 or ci.shape != pi.shape:
-        raise ValueError(f"camera_indices and point_indices must be 1-D of equal length; got {ci.shape} and {pi.shape}")
-    if ci.size == 0 or not (np.issubdtype(ci.dtype, np.integer) and np.issubdtype(pi.dtype, np.integer)):
-        raise ValueError("camera_indices and point_indices must be non-empty integer arrays")
-    if ci.min() < 0 or ci.max() >= n_cameras or pi.min() < 0 or pi.max() >= n_points:
-        raise ValueError(f"an index is out of range (cameras 0..{n_cameras - 1}, points 0..{n_points - 1})")
+    ci = as_indices(camera_indices, "camera_indices", None, n_cameras, "camera", upper_name="R")
+    pi = as_indices(point_indices, "point_indices", ci.shape[0], n_points, "point", upper_name="X")
+    if ci.size == 0:
+        raise ValueError("camera_indices and point_indices are empty: no observations")
     return ci.astype(np.intp), pi.astype(np.intp)
 
 

@@ -272,7 +272,7 @@ def test_bad_input(rng):
         bundle_adjust(R0, t0, X0, ci, pi, bad, s.K)
     badX = X0.copy()
     badX[0, 0] = np.inf
-    with pytest.raises(ValueError, match="points_3d has non-finite"):
+    with pytest.raises(ValueError, match="X has non-finite"):
         bundle_adjust(R0, t0, badX, ci, pi, x, s.K)
     with pytest.raises(ValueError, match="non-finite"):
         bundle_adjust(R0, t0 * np.nan, X0, ci, pi, x, s.K)
@@ -287,7 +287,7 @@ def test_bad_input(rng):
     remap = np.searchsorted(sub, pi[few])
     with pytest.raises(ValueError, match="fewer residuals"):
         bundle_adjust(R0, t0, X0[sub], ci[few], remap, x[few], s.K)
-    with pytest.raises(ValueError, match="observations"):
+    with pytest.raises(ValueError, match="one entry of each per observation"):
         bundle_adjust(R0, t0, X0, ci, pi[:-1], x, s.K)
     with pytest.raises(ValueError, match="integers"):
         bundle_adjust(R0, t0, X0, ci + 0.5, pi, x, s.K)
