@@ -419,3 +419,12 @@ def load_temple():
 
 TEMPLE_BOX = np.array([[-0.023121, -0.038009, -0.091940], [0.078626, 0.121636, -0.017395]])
 """The temple ring's tight bounding box (min corner, max corner), from the data set's README."""
+
+
+if __name__ == "__main__":
+    # `python -m labutils.data fetch NAME|all` and `list`: the registry and the command line live in fetch.py
+    import sys
+
+    from .fetch import main
+
+    sys.exit(main())
