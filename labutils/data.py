@@ -4,9 +4,12 @@ fallback when they are missing.
 Where the files are looked for is :mod:`labutils.datapath`; ``python -m labutils.data fetch NAME|all`` downloads
 them (:mod:`labutils.fetch`) and ``python -m labutils.data list`` shows what is present.
 """
+import sys
+
 import numpy as np
 import scipy.io
 
+from . import fetch
 from ._validation import as_rng
 from .datapath import DataNotFoundError, find_data
 from .geometry import KRt_from_P
@@ -172,3 +175,13 @@ def load_temple():
 
 TEMPLE_BOX = np.array([[-0.023121, -0.038009, -0.091940], [0.078626, 0.121636, -0.017395]])
 """The temple ring's tight bounding box (min corner, max corner), from the data set's README."""
+
+
+
+def main(argv=None):
+    """``python -m labutils.data fetch NAME|all`` and ``python -m labutils.data list``: see :mod:`labutils.fetch`."""
+    return fetch.main(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

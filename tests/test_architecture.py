@@ -17,7 +17,7 @@ PKG = ROOT / "labutils"
 # The layers, bottom first. A module may import only modules of lower layers, or earlier ones in its own layer.
 # The README draws the same layers (test_readme_draws_the_layers); add a new module where its idea belongs.
 LAYERS = {
-    "foundation": ["_validation", "_cli", "_blas", "datapath", "ransac", "robust"],
+    "foundation": ["_validation", "_cli", "_blas", "datapath", "datasets", "fetch", "ransac", "robust"],
     "geometry": ["geometry"],
     "records and files": ["metrics", "scene", "formats", "bal"],
     "data": ["synthetic", "data"],
@@ -26,7 +26,7 @@ LAYERS = {
     "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
     "reconstruction": ["twoview", "reconstruction", "sfm"],
     "precision": ["uncertainty", "noise_study"],
-    "presentation and tools": ["plotting", "bench", "exercises"],
+    "presentation and tools": ["plotting", "bench", "exercises", "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]
 
@@ -128,7 +128,7 @@ def test_public_names_resolve():
 
 def test_command_lines_do_not_warn():
     """``python -m labutils.X --help`` exits 0 and prints no RuntimeWarning ('found in sys.modules')."""
-    for cmd in ("sfm", "bundle", "bench"):
+    for cmd in ("sfm", "bundle", "bench", "data", "notebook_filter"):
         r = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", f"labutils.{cmd}", "--help"],
                            capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 0 and "usage" in r.stdout and "Warning" not in r.stderr, (cmd, r.stderr)
