@@ -43,8 +43,8 @@ from .geometry import angle_axis_from_rotation
 
 __all__ = ["distort", "undistort_normalised", "undistort_points", "project_points", "board_homography",
            "intrinsics_from_homographies", "pose_from_homography", "CalibrationProblem", "levenberg_marquardt",
-           "CalibrationResult", "calibrate_camera", "view_influence", "StereoCalibration", "calibrate_stereo",
-           "INTRINSIC_NAMES"]
+           "CalibrationResult", "calibration_problem", "calibrate_camera", "view_influence", "StereoCalibration",
+           "calibrate_stereo", "INTRINSIC_NAMES"]
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
@@ -822,6 +822,28 @@ def calibrate_camera(object_points, image_points, image_size, *, fix_aspect_rati
     >>> bool(np.allclose(cal.K, views.K, rtol=1e-8) and np.allclose(cal.dist, views.dist, atol=1e-8))
     True
     """
+    prob, p0, K0 = calibration_problem(object_points, image_points, image_size, fix_aspect_ratio=fix_aspect_ratio,
+                                       fix_principal_point=fix_principal_point, zero_tangential=zero_tangential,
+                                       fix_k3=fix_k3, fix_distortion=fix_distortion, K_init=K_init)
+    p, info = levenberg_marquardt(prob.residuals_and_jacobian, p0, max_iter=max_iter, tol=tol)
+    return _result(prob, p, info, K0, _image_size(image_size), prob.intrinsic_names[0])
+
+
+def calibration_problem(object_points, image_points, image_size, *, fix_aspect_ratio=False, fix_principal_point=False,
+                        zero_tangential=False, fix_k3=False, fix_distortion=False, K_init=None):
+    """The least-squares problem of :func:`calibrate_camera` and its starting point (steps 1–3 of Zhang's method).
+
+    Homographies, the closed-form K (zero skew; ``fx = fy`` with ``fix_aspect_ratio``), each view's pose, and zero
+    distortion give the start ``p0`` of the refinement. Arguments as for :func:`calibrate_camera`.
+
+    Returns
+    -------
+    problem : CalibrationProblem
+        One camera; its free intrinsics are named in ``problem.intrinsic_names[0]``.
+    p0 : (n_params,) ndarray
+    K0 : (3, 3) ndarray
+        The closed-form K (or ``K_init``).
+    """
     Xs, xs = _check_views(object_points, image_points, 3)
     w, h = _image_size(image_size)
     Hs = np.stack([board_homography(X, x) for X, x in zip(Xs, xs)])
@@ -833,9 +855,7 @@ def calibrate_camera(object_points, image_points, image_size, *, fix_aspect_rati
     theta0 = np.r_[K0[0, 0], K0[1, 1], K0[0, 2], K0[1, 2], np.zeros(5)]
     A, names = _intrinsic_map(theta0, fix_aspect_ratio, fix_principal_point, zero_tangential, fix_k3, fix_distortion)
     prob = CalibrationProblem(*_stack(Xs, xs), theta0[None], [A], [names])
-    p0 = prob.pack(board_R=[R for R, _ in poses], board_t=[t for _, t in poses])
-    p, info = levenberg_marquardt(prob.residuals_and_jacobian, p0, max_iter=max_iter, tol=tol)
-    return _result(prob, p, info, K0, (w, h), names)
+    return prob, prob.pack(board_R=[R for R, _ in poses], board_t=[t for _, t in poses]), K0
 
 
 def _image_size(image_size):

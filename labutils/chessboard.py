@@ -21,7 +21,8 @@ from .data import DataNotFoundError, find_data
 from .geometry import rotation_from_angle_axis
 
 __all__ = ["board_points", "detect_corners", "grid_line_residuals", "BoardViews", "synthetic_board_views",
-           "render_board", "render_board_views", "load_chessboard", "DEFAULT_K", "DEFAULT_DIST"]
+           "render_board", "render_board_views", "load_chessboard", "synthetic_stereo_views", "load_stereo_chessboard",
+           "DEFAULT_K", "DEFAULT_DIST"]
 
 #: The synthetic camera: close to the OpenCV sample camera (640×480), with a little fx/fy difference.
 DEFAULT_K = np.array([[540.0, 0.0, 322.0], [0.0, 536.0, 238.0], [0.0, 0.0, 1.0]])
@@ -159,7 +160,8 @@ class BoardViews:
         return len(self.x)
 
 
-def _random_board_pose(rng, K, dist, image_size, board, square, min_dist, max_dist, max_tilt_deg, margin_px):
+def _random_board_pose(rng, K, dist, image_size, board, square, min_dist, max_dist, max_tilt_deg, margin_px,
+                       also=None):
     nx, ny = board
     Xb = board_points(board, square)
     centre = np.array([(nx - 1) * square / 2, (ny - 1) * square / 2, 0.0])
@@ -175,18 +177,19 @@ def _random_board_pose(rng, K, dist, image_size, board, square, min_dist, max_di
         u, v = rng.uniform(0.15, 0.85) * w, rng.uniform(0.15, 0.85) * h
         ray = np.linalg.solve(K, [u, v, 1.0])
         t = depth * ray / ray[2] - R @ centre
+        cams = [(K, dist, R, t)] + ([] if also is None else [(also[0], also[1], also[2] @ R, also[2] @ t + also[3])])
         try:
-            x = project_points(np.vstack([Xb, outline]), K, dist, R, t)
+            xs = [project_points(np.vstack([Xb, outline]), *cam) for cam in cams]
         except ValueError:
             continue
-        if (x[:, 0].min() > margin_px and x[:, 0].max() < w - 1 - margin_px and x[:, 1].min() > margin_px
-                and x[:, 1].max() < h - 1 - margin_px):
+        if all(x[:, 0].min() > margin_px and x[:, 0].max() < w - 1 - margin_px and x[:, 1].min() > margin_px
+               and x[:, 1].max() < h - 1 - margin_px for x in xs):
             return R, t
     raise ValueError("could not place the board inside the image: make the board smaller or the distances larger")
 
 
 def synthetic_board_views(rng, n_views=12, noise_px=0.1, *, K=None, dist=None, board=(9, 6), square=0.025,
-                          image_size=(640, 480), distance=(0.3, 0.5), max_tilt_deg=45.0, margin_px=12.0):
+                          image_size=(640, 480), distance=(0.3, 0.5), max_tilt_deg=45.0, margin_px=12.0, _also=None):
     """Random board poses, as a person photographing a board would take them, with exact corner projections.
 
     Each board is tilted by 10°–``max_tilt_deg`` about a random axis in its plane, turned by up to ±30° in it,
@@ -227,7 +230,7 @@ def synthetic_board_views(rng, n_views=12, noise_px=0.1, *, K=None, dist=None, b
     X = board_points(board, square)
     Rs, ts, x_true, x = [], [], [], []
     for _ in range(int(n_views)):
-        R, t = _random_board_pose(rng, K, dist, (w, h), board, square, *distance, max_tilt_deg, margin_px)
+        R, t = _random_board_pose(rng, K, dist, (w, h), board, square, *distance, max_tilt_deg, margin_px, _also)
         xt = project_points(X, K, dist, R, t)
         Rs.append(R)
         ts.append(t)
@@ -374,6 +377,77 @@ def load_chessboard(side="left", *, board=(9, 6), square=0.025):
     h, w = images[0].shape
     return BoardViews(X=board_points(board, square), x=xs, names=names, image_size=(w, h), board=_board(board),
                       square=square, source="real", images=images, rejected=rejected)
+
+
+#: The synthetic stereo rig's second camera: 8 cm to the right, turned by a degree or two, its own K and lens.
+RIG_K2 = np.array([[545.0, 0.0, 318.0], [0.0, 542.0, 244.0], [0.0, 0.0, 1.0]])
+RIG_DIST2 = np.array([-0.27, 0.1, -0.0006, 0.0009, -0.02])
+RIG_R = rotation_from_angle_axis([0.004, -0.012, 0.007])
+RIG_T = np.array([-0.08, 0.0008, 0.0004])
+
+
+def _same_order(x, x_true):
+    """The detector may list the corners from the other end (a half turn of the board): match the truth's order."""
+    return x[::-1].copy() if np.abs(x[::-1] - x_true).max() < np.abs(x - x_true).max() else x
+
+
+def synthetic_stereo_views(rng, n_views=13, *, noise=2.0, verbose=False):
+    """Rendered views of the 9×6 board by a stereo rig with known truth, detected like real photos.
+
+    Camera 1 is :data:`DEFAULT_K`, :data:`DEFAULT_DIST`; camera 2 is ``RIG_K2, RIG_DIST2`` at ``x_cam2 = RIG_R @
+    x_cam1 + RIG_T`` (8 cm to the right, like OpenCV's sample rig). Each board pose is seen whole by both cameras;
+    the images are drawn by :func:`render_board` (with grey-level noise ``noise``) and the corners found by
+    :func:`detect_corners`, listed in the order of :func:`board_points`.
+
+    Returns
+    -------
+    left, right : BoardViews
+        ``source='synthetic'``, with images, detected corners ``x`` and the truth (``right.R, right.t`` are the
+        board poses in camera 2).
+    """
+    left = synthetic_board_views(rng, n_views, 0.0, distance=(0.3, 0.45), max_tilt_deg=50,
+                                 _also=(RIG_K2, RIG_DIST2, RIG_R, RIG_T))
+    R2, t2 = RIG_R @ left.R, left.t @ RIG_R.T + RIG_T
+    right = BoardViews(X=left.X, x=[], names=[f"right{v:02d}" for v in range(n_views)], image_size=left.image_size,
+                       board=left.board, square=left.square, source="synthetic", K=RIG_K2.copy(),
+                       dist=RIG_DIST2.copy(), R=R2, t=t2,
+                       x_true=[project_points(left.X, RIG_K2, RIG_DIST2, R, t) for R, t in zip(R2, t2)], noise_px=0.0)
+    left.names = [f"left{v:02d}" for v in range(n_views)]
+    for views in (left, right):
+        views.images = render_board_views(views, noise=noise, rng=rng)
+        found = [detect_corners(img, views.board) for img in views.images]
+        if any(x is None for x in found):
+            raise RuntimeError("a rendered board was not detected")     # does not happen with these poses
+        views.x = [_same_order(x, xt) for x, xt in zip(found, views.x_true)]
+        views.noise_px = None
+    return left, right
+
+
+def load_stereo_chessboard(rng, verbose=True):
+    """The OpenCV sample stereo views if they are on the data path, else :func:`synthetic_stereo_views` (and say so).
+
+    Returns
+    -------
+    left, right : BoardViews
+        Pairs in the same order (``left.names[k]`` and ``right.names[k]`` are one moment).
+    """
+    try:
+        left, right = load_chessboard("left"), load_chessboard("right")
+        both = sorted(set(n[4:] for n in left.names) & set(n[5:] for n in right.names))
+        for views, side in ((left, "left"), (right, "right")):
+            keep = [views.names.index(side + n) for n in both]
+            views.x, views.images, views.names = ([getattr(views, a)[k] for k in keep]
+                                                  for a in ("x", "images", "names"))
+        if verbose:
+            w, h = left.image_size
+            print(f"real data: OpenCV's sample stereo views, {len(both)} pairs of {w}x{h} images, "
+                  f"{left.board[0]}x{left.board[1]} inner corners, {left.square} m squares")
+        return left, right
+    except DataNotFoundError as exc:
+        if verbose:
+            print(f"{str(exc).splitlines()[0]}\nusing synthetic views instead: a rendered stereo rig with known K, "
+                  "distortion and poses")
+        return synthetic_stereo_views(rng)
 
 
 def grid_line_residuals(x, board=(9, 6)):
