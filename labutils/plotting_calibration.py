@@ -2,6 +2,7 @@
 import numpy as np
 
 from .calibration import distort, undistort_points
+from .chessboard import grid_line_residuals
 
 
 def plot_corners(ax, x, board=(9, 6), image=None, image_size=None, color="C1", size=12, label=None):
@@ -83,15 +84,40 @@ def plot_rectified_pair(ax, image1, image2, n_lines=12, x1=None, x2=None, color=
 
 
 def plot_line_fits(ax, x, board=(9, 6), K=None, dist=None, color_before="C3", color_after="C2"):
-    """The board's corner rows as measured (bent by the lens) and after undistortion (straight)."""
-    x = np.asarray(x, float)
+    """How far each corner of each board row lies from the row's fitted straight line: measured, and undistorted.
+
+    One curve per row (x: the corner's place in the row, y: its signed distance in pixels). A lens with barrel
+    distortion bows the rows, so the measured curves are arcs; undistorted they are flat up to the corner noise.
+    """
     nx, ny = board
-    rows = [x] if K is None else [x, undistort_points(x, K, dist)]
-    for pts, c, lab in zip(rows, [color_before, color_after], ["measured", "undistorted"]):
+    x = np.asarray(x, float)
+    sets = [(x, color_before, "measured")]
+    if K is not None:
+        sets.append((undistort_points(x, K, dist), color_after, "undistorted"))
+    for pts, c, lab in sets:
+        d = grid_line_residuals(pts, board)[:nx * ny].reshape(ny, nx)
         for j in range(ny):
-            r = pts[j * nx:(j + 1) * nx]
-            ax.plot(*r.T, "o-", color=c, ms=2, lw=0.7, label=lab if j == 0 else None)
-    ax.set_aspect("equal")
-    ax.invert_yaxis()
+            ax.plot(np.arange(nx), d[j], "o-", color=c, ms=3, lw=0.8, label=lab if j == 0 else None)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("corner along the row")
+    ax.set_ylabel("distance from the row's line (px)")
     ax.legend(fontsize=8)
+    return ax
+
+
+def plot_board_poses(ax, R, t, board=(9, 6), square=0.025, names=None, camera_size=0.05):
+    """The boards of all views in the camera's frame, on a 3D axis (x right, y down, z forward; the camera at 0)."""
+    nx, ny = board
+    outline = np.array([[-1, -1, 0], [nx, -1, 0], [nx, ny, 0], [-1, ny, 0], [-1, -1, 0]], float) * square
+    for v, (Rv, tv) in enumerate(zip(np.asarray(R), np.asarray(t))):
+        P = outline @ Rv.T + tv
+        ax.plot(P[:, 0], P[:, 2], -P[:, 1], lw=1)
+        if names is not None:
+            ax.text(*(P[0, [0, 2]]), -P[0, 1], str(names[v]).rsplit("/", 1)[-1].split(".")[0], fontsize=6)
+    s = camera_size
+    for c in np.array([[-1, -0.75, 1.5], [1, -0.75, 1.5], [1, 0.75, 1.5], [-1, 0.75, 1.5]]) * s:
+        ax.plot([0, c[0]], [0, c[2]], [0, -c[1]], "k-", lw=0.8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z, forward (m)")
+    ax.set_zlabel("-y, up (m)")
     return ax
