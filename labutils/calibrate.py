@@ -38,6 +38,7 @@ import numpy as np
 
 from .calibration import calibrate_camera, undistort_points
 from .chessboard import board_points, detect_corners
+from .rectification import remap_grid
 
 
 class CommandError(Exception):
@@ -208,8 +209,6 @@ def undistorted_images(files, K, dist, size, out_dir, quiet=False):
     Raises CommandError for an unreadable photo, one of another size than the calibration images, or two photos
     with the same file name.
     """
-    from .rectification import remap_grid
-
     names = {}
     for f in files:
         name = Path(f).name

@@ -474,6 +474,8 @@ class CalibrationProblem:
         Intrinsics at which δ = 0.
     A : list of C (9, q_c) arrays
         How the free intrinsics enter (see :func:`calibrate_camera` for the options).
+    intrinsic_names : list of C lists of str, optional
+        Names of each camera's free intrinsics (for printing).
     """
 
     def __init__(self, X, x, cam, view, theta0, A, intrinsic_names=None):
@@ -632,7 +634,8 @@ def levenberg_marquardt(fun_and_jac, p0, *, max_iter=100, tol=1e-12):
     p : (n,) ndarray
     info : dict
         ``cost`` (0.5·Σr²), ``costs`` (per accepted step, starting with the initial cost), ``n_iter``, ``r``, ``J``
-        (at ``p``), ``converged``.
+        (at ``p``), ``converged`` (False only when ``max_iter`` ran out; when no step lowers the cost any more, even
+        with a huge damping, we are at the minimum to rounding and that counts as converged).
 
     Examples
     --------
@@ -769,7 +772,7 @@ def _stack(Xs, xs, cam=0):
     return np.vstack(Xs), np.vstack(xs), np.full(len(view), cam), view
 
 
-def _covariance(J, r, n_free_int):
+def _covariance(J, r):
     dof = len(r) - J.shape[1]
     if dof <= 0:
         raise ValueError(f"{len(r)} residuals for {J.shape[1]} parameters: not enough to calibrate")
@@ -872,7 +875,7 @@ def _result(prob, p, info, K0, image_size, names):
     r = info["r"].reshape(-1, 2)
     K, dist = prob.K_dist(p)
     R, t = prob.board_poses(p)
-    sigma, cov = _covariance(info["J"], info["r"], len(names))
+    sigma, cov = _covariance(info["J"], info["r"])
     A = prob.A[0]
     cov_theta = A @ cov[np.ix_(prob.int_cols[0], prob.int_cols[0])] @ A.T
     std = dict(zip(INTRINSIC_NAMES, np.sqrt(np.maximum(np.diag(cov_theta), 0))))
@@ -890,8 +893,8 @@ def view_influence(cal, leave_one_out=True):
     The intrinsics' information matrix, with every board pose eliminated (the Schur complement, H&Z A6.3), is a
     sum over views, ``S = Σ_v S_v`` with ``S_v = A_vᵀA_v - A_vᵀB_v (B_vᵀB_v)⁻¹ B_vᵀA_v`` (``A_v``, ``B_v``: the
     Jacobian's rows of view v, columns of the intrinsics and of its pose). A view's **share** is
-    ``tr(S_v S⁻¹) / q`` (q free intrinsics): the shares sum to 1, and a view with share s alone would give the
-    covariance that all of them give, divided by s... in the average over the parameters.
+    ``tr(S_v S⁻¹) / q`` (q free intrinsics): the shares sum to 1; removing a view of share s raises the variances of
+    the intrinsics by about ``1 / (1 - s)`` on average (to first order, in the metric of ``S``).
 
     Parameters
     ----------
@@ -1043,7 +1046,7 @@ def calibrate_stereo(object_points, image_points1, image_points2, cal1, cal2, *,
     Rc, tc = prob.rig_poses(p)
     bR, bt = prob.board_poses(p)
     r = info["r"].reshape(-1, 2)
-    _, cov = _covariance(info["J"], info["r"], 0)
+    _, cov = _covariance(info["J"], info["r"])
     std_t = np.sqrt(np.maximum(np.diag(cov)[prob.rig_cols[1][3:]], 0))
     (K1, d1), (K2, d2) = prob.K_dist(p, 0), prob.K_dist(p, 1)
     return StereoCalibration(K1=K1, dist1=d1, K2=K2, dist2=d2, R=Rc[1], t=tc[1],

@@ -7,7 +7,7 @@
 - :func:`rectify_fusiello`: rectifying homographies for a calibrated pair. Both cameras are turned (about their
   centres) to one common orientation whose x axis is the baseline, and given one common K. Then corresponding
   points lie on the same image row: the epipoles are at infinity along x, and ``F`` of the rectified pair is
-  ``[e]× = [(1, 0, 0)]×`` (H&Z Sec. 11.12, Example 11.12... the "standard" stereo geometry).
+  ``[(1, 0, 0)]×``, the F of a pure translation along x (H&Z Sec. 9.3.1 and 11.12).
 - :func:`rectify_points`, :func:`rectify_image`: apply it to pixels and to images (with the distortion undone on
   the way).
 

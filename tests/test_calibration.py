@@ -500,3 +500,14 @@ def test_render_board_is_the_camera_model(rendered):
     assert np.abs(img.astype(int) - images[0].astype(int)).max() <= 12          # only the noise (σ = 2) differs
     with pytest.raises(ValueError, match="needs rng"):
         render_board(views.K, views.dist, views.R[0], views.t[0], noise=1.0)
+
+
+def test_synthetic_stereo_views_are_consistent():
+    """The notebook's fallback: both cameras see every board, corners in board order, the rig as documented."""
+    from labutils.chessboard import RIG_R, RIG_T, synthetic_stereo_views
+    left_s, right_s = synthetic_stereo_views(np.random.default_rng(3), n_views=3)
+    for views in (left_s, right_s):
+        assert len(views.images) == 3 and views.source == "synthetic"
+        for x, xt in zip(views.x, views.x_true):
+            assert np.abs(x - xt).max() < 0.3                       # detected, in the order of board_points
+    assert np.allclose(right_s.R, RIG_R @ left_s.R) and np.allclose(right_s.t, left_s.t @ RIG_R.T + RIG_T)
