@@ -69,7 +69,7 @@ def board_points(board=(9, 6), square=0.025):
     return np.column_stack([i.ravel() * square, j.ravel() * square, np.zeros(nx * ny)])
 
 
-def detect_corners(image, board=(9, 6), *, refine=True):
+def detect_corners(image, board=(9, 6), *, refine=True, max_side=800):
     """Find the inner corners of a chessboard: OpenCV's detector, then sub-pixel refinement.
 
     ``cv2.findChessboardCorners`` finds the board and orders its corners row by row, in the order of
@@ -88,6 +88,10 @@ def detect_corners(image, board=(9, 6), *, refine=True):
         Inner corners per row and per column.
     refine : bool
         Run ``cornerSubPix``.
+    max_side : int
+        Larger images (a phone's 12 megapixels) are searched for the board at this size: OpenCV's detector slows down
+        steeply with the image size (measured: 0.02 s at 640×480, 7 s at 1600×1200 for the same board). The corners
+        are then refined at full resolution.
 
     Returns
     -------
@@ -102,15 +106,19 @@ def detect_corners(image, board=(9, 6), *, refine=True):
         raise ValueError(f"image must be a grey (h, w) or colour (h, w, 3) array; got shape {img.shape}")
     if img.dtype != np.uint8:
         raise ValueError(f"image must be uint8 (0-255); got {img.dtype}")
-    found, c = cv2.findChessboardCorners(img, (nx, ny), flags=cv2.CALIB_CB_ADAPTIVE_THRESH
+    scale = min(1.0, max_side / max(img.shape))
+    small = img if scale == 1.0 else cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    found, c = cv2.findChessboardCorners(small, (nx, ny), flags=cv2.CALIB_CB_ADAPTIVE_THRESH
                                          + cv2.CALIB_CB_NORMALIZE_IMAGE)
     if not found or c is None or len(c) != nx * ny:
         return None
+    if scale < 1.0:
+        c = ((c + 0.5) / scale - 0.5).astype(np.float32)         # pixel centres at integer coordinates
     if refine:
         g = c.reshape(ny, nx, 2)
         spacing = min(np.linalg.norm(np.diff(g, axis=0), axis=2).min(),
                       np.linalg.norm(np.diff(g, axis=1), axis=2).min())
-        half = int(np.clip(spacing / 2 - 1, 2, 5))
+        half = int(np.clip(spacing / 2 - 1, 2, 5 / scale))
         c = cv2.cornerSubPix(img, c, (half, half), (-1, -1),
                              (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4))
     return c.reshape(-1, 2).astype(float)
