@@ -814,8 +814,8 @@ def calibrate_camera(object_points, image_points, image_size, *, fix_aspect_rati
     Raises
     ------
     ValueError
-        Fewer than 3 views, mismatched shapes, non-planar board points, or views that do
-        not determine K.
+        Fewer than 3 views, mismatched shapes, non-planar board points, views that do not determine K, or a
+        refinement that does not converge.
 
     Examples
     --------
@@ -829,7 +829,15 @@ def calibrate_camera(object_points, image_points, image_size, *, fix_aspect_rati
                                        fix_principal_point=fix_principal_point, zero_tangential=zero_tangential,
                                        fix_k3=fix_k3, fix_distortion=fix_distortion, K_init=K_init)
     p, info = levenberg_marquardt(prob.residuals_and_jacobian, p0, max_iter=max_iter, tol=tol)
+    _require_convergence(info, max_iter)
     return _result(prob, p, info, K0, _image_size(image_size), prob.intrinsic_names[0])
+
+
+def _require_convergence(info, max_iter):
+    if not info["converged"]:
+        rms = np.sqrt(2 * np.mean(info["r"] ** 2))
+        raise ValueError(f"Levenberg–Marquardt did not converge in {max_iter} iterations (RMS {rms:.3g} px): the views "
+                         "do not determine the camera well (too few, too similar, or wrongly detected corners)")
 
 
 def calibration_problem(object_points, image_points, image_size, *, fix_aspect_ratio=False, fix_principal_point=False,
@@ -1043,6 +1051,7 @@ def calibrate_stereo(object_points, image_points1, image_points2, cal1, cal2, *,
                               names)
     p0 = prob.pack(rig_R=[R0], rig_t=[t0], board_R=cal1.R, board_t=cal1.t)
     p, info = levenberg_marquardt(prob.residuals_and_jacobian, p0, max_iter=max_iter, tol=tol)
+    _require_convergence(info, max_iter)
     Rc, tc = prob.rig_poses(p)
     bR, bt = prob.board_poses(p)
     r = info["r"].reshape(-1, 2)

@@ -520,3 +520,9 @@ def test_large_images_are_searched_small_and_refined_at_full_size(rendered):
     xt = (views.x_true[1] + 0.5) * 3 - 0.5                                               # pixel centres at integers
     x = x[::-1] if np.abs(x[::-1] - xt).max() < np.abs(x - xt).max() else x
     assert np.sqrt(np.mean((x - xt) ** 2)) < 0.3          # the 640x480 detection error (0.04 px) times 3, and margin
+
+
+def test_refinement_that_does_not_converge_is_an_error():
+    v = synthetic_board_views(np.random.default_rng(5), n_views=4, noise_px=0.2)
+    with pytest.raises(ValueError, match="did not converge in 2 iterations"):
+        calibrate_camera([v.X] * 4, v.x, v.image_size, max_iter=2)
