@@ -5,6 +5,7 @@ Each ``python -m labutils.<command>`` raises :class:`CommandError` (or ``ValueEr
 library, which already name the file and line) and lets :func:`run` turn it into ``error: ...`` on stderr with
 exit status 2 — never a traceback.
 """
+import argparse
 import os
 import sys
 import tempfile
@@ -33,20 +34,30 @@ def run(main, argv=None):
     return 0 if status is None else int(status)
 
 
-def check_output_path(path, what="output"):
+def check_output_path(path, what=None):
     """Fail early (before any work) when ``path`` cannot be written: its folder is missing or it is a folder.
 
     Returns ``Path(path)``.
     """
     path = Path(path)
+    tail = f" ({what})" if what else ""
     if path.is_dir():
-        raise CommandError(f"{path}: the {what} path is a folder; give a file name")
+        raise CommandError(f"{path}: is a folder; give a file name{tail}")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise CommandError(f"{path}: the file exists and is not writable{tail}")
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise CommandError(f"{path}: the folder {folder} does not exist")
+        raise CommandError(f"{path}: the folder {folder} does not exist{tail}")
     if not os.access(folder, os.W_OK):
-        raise CommandError(f"{path}: the folder {folder} is not writable")
+        raise CommandError(f"{path}: the folder {folder} is not writable{tail}")
     return path
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, with a bad argument reported on one line (``error: ...``, exit status 2) like every failure."""
+
+    def error(self, message):
+        self.exit(2, f"error: {message} (see --help)\n")
 
 
 def _umask():
@@ -55,47 +66,65 @@ def _umask():
     return mask
 
 
-def write_atomically(path, data):
-    """Write ``data`` (str or bytes) to ``path`` through a temporary file in the same folder, then rename.
+def write_all_atomically(outputs):
+    """Write ``{path: str or bytes}``, each to a temporary file in its folder, then ``os.replace`` them all.
 
-    The file gets the usual mode (``0o666 & ~umask``, i.e. 0644 under umask 022); on any failure (disk full,
-    file too large, a folder in the way) the temporary file is removed, nothing is left behind, and the error
-    names ``path``.
+    On any failure (disk full, file too large, permissions) every temporary file is removed, nothing is replaced,
+    and the ``CommandError`` names the path. The files get the usual mode ``0o666 & ~umask`` (0644 under umask 022).
     """
-    path = Path(path)
-    mode = "wb" if isinstance(data, (bytes, bytearray)) else "w"
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".tmp")
+    mode = 0o666 & ~_umask()
+    temps, target = [], None
     try:
-        with os.fdopen(fd, mode) as f:
-            f.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(exc, OSError):
-            raise CommandError(f"{path}: cannot write ({exc.strerror or exc})") from None
-        raise
+        for target, data in outputs.items():
+            p = Path(target)
+            fd, tmp = tempfile.mkstemp(dir=p.parent if str(p.parent) else ".", prefix=f".{p.name}.", suffix=".tmp")
+            temps.append((tmp, target))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data.encode() if isinstance(data, str) else data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.chmod(tmp, mode)
+        for tmp, target in temps:
+            os.replace(tmp, target)
+    except OSError as exc:
+        for tmp, _ in temps:
+            try:
+                os.remove(tmp)
+            except OSError:
+                pass
+        raise CommandError(f"{target}: cannot write ({exc.strerror or exc})") from None
+
+
+def write_atomically(path, data):
+    """Write one file the way :func:`write_all_atomically` does."""
+    write_all_atomically({path: data})
 
 
 class Progress:
-    """A progress bar on stderr: ``label [#####.....] 5/10 1.2 s`` redrawn in place on a terminal, and printed
-    at about every fifth of the way elsewhere (so a log or a notebook still shows where the work is)."""
+    """A progress bar on stderr: ``label [#####.....] 5/10 1.2 s note`` redrawn in place on a terminal; elsewhere (a
+    log, CI) one line at about every fifth of the way, and every line that carries a note. Silent with ``quiet``."""
 
-    def __init__(self, total, label="", stream=None, width=30):
-        self.total, self.label, self.n, self.width = max(int(total), 1), label, 0, width
+    def __init__(self, total, label="", *, quiet=False, stream=None, width=20):
+        self.total, self.label, self.n, self.width, self.quiet = max(int(total), 1), label, 0, width, quiet
         self.stream = sys.stderr if stream is None else stream
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.every = max(1, self.total // 5)
         self.tic = time.perf_counter()
 
-    def step(self, n=1):
+    def step(self, n=1, note=""):
+        """Advance by ``n``; ``note`` (e.g. "board not found, skipped") is shown with the bar."""
         self.n = min(self.n + n, self.total)
-        if self.tty or self.n % self.every == 0 or self.n == self.total:
-            filled = int(self.width * self.n / self.total)
-            line = (f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {self.n}/{self.total} "
-                    f"{time.perf_counter() - self.tic:.1f} s")
-            end = "\n" if (self.n == self.total or not self.tty) else ""
-            print(("\r" if self.tty else "") + line, end=end, file=self.stream, flush=True)
+        if self.quiet or not (self.tty or note or self.n % self.every == 0 or self.n == self.total):
+            return
+        filled = int(self.width * self.n / self.total)
+        line = (f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {self.n}/{self.total} "
+                f"{time.perf_counter() - self.tic:.1f} s" + (f" {note}" if note else ""))
+        if self.tty:
+            print(f"\r\033[K{line}", end="\n" if self.n == self.total else "", file=self.stream, flush=True)
+        else:
+            print(line, file=self.stream, flush=True)
+
+    def note(self, text):
+        """A line of its own (a warning, a stage)."""
+        if not self.quiet:
+            print(("\r\033[K" if self.tty else "") + text, file=self.stream, flush=True)

@@ -26,7 +26,8 @@ LAYERS = {
     "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
     "reconstruction": ["twoview", "reconstruction", "sfm"],
     "precision": ["uncertainty", "noise_study"],
-    "presentation and tools": ["plotting", "bench", "exercises", "notebook_filter"],
+    "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
+    "presentation and tools": ["plotting", "plotting_calibration", "bench", "exercises", "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]
 
@@ -128,7 +129,7 @@ def test_public_names_resolve():
 
 def test_command_lines_do_not_warn():
     """``python -m labutils.X --help`` exits 0 and prints no RuntimeWarning ('found in sys.modules')."""
-    for cmd in ("sfm", "bundle", "bench", "data", "notebook_filter"):
+    for cmd in ("sfm", "bundle", "bench", "data", "notebook_filter", "calibrate"):
         r = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", f"labutils.{cmd}", "--help"],
                            capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 0 and "usage" in r.stdout and "Warning" not in r.stderr, (cmd, r.stderr)
