@@ -18,7 +18,6 @@ whether ``pyceres`` is importable.
 The README's results table quotes what this prints on the 2-core workbook machine. Progress goes to stderr, one
 JSON document to stdout (``python -m labutils.bench ba | python -m json.tool`` works).
 """
-import argparse
 import importlib.util
 import json
 import os
@@ -130,7 +129,7 @@ def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
 
 
 def _parser():
-    ap = argparse.ArgumentParser(prog="python -m labutils.bench",
+    ap = _cli.Parser(prog="python -m labutils.bench",
                                  description="Benchmarks, printed as one JSON document (never asserted).")
     sub = ap.add_subparsers(dest="what", required=True)
     ba = sub.add_parser("ba", help="bundle adjustment: LM-Schur against scipy's least_squares",

@@ -23,7 +23,6 @@ numbers. Both solvers run with OpenBLAS on one thread (:func:`labutils._blas.sin
 Command line: ``python -m labutils.bundle PROBLEM.txt --solver {lm-schur,scipy} --out SOLVED.txt
 [--fix-intrinsics] [--json] [--verbose]`` solves a BAL file (see :mod:`labutils.bal`).
 """
-import argparse
 import contextlib
 import json
 import sys
@@ -398,7 +397,7 @@ def solve_bal(problem: BALProblem, *, solver: str = "lm-schur", fix_intrinsics: 
 
 
 def _parser():
-    ap = argparse.ArgumentParser(prog="python -m labutils.bundle",
+    ap = _cli.Parser(prog="python -m labutils.bundle",
                                  description="Bundle-adjust a BAL ('Bundle Adjustment in the Large') problem file.")
     ap.add_argument("problem", help="BAL problem file (.txt or .txt.bz2)")
     ap.add_argument("--solver", choices=("lm-schur", "scipy"), default="lm-schur")

@@ -24,7 +24,6 @@ the Schur complement) with a robust loss (Cauchy, scale 1 px, by default).
 The result is a :class:`Reconstruction`. Run it from the command line with
 ``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
 """
-import argparse
 import contextlib
 import json
 import sys
@@ -521,7 +520,7 @@ def bundle_from_cameras(tracks, K, R, t, *, threshold_px=4.0, min_angle_deg=1.5,
 
 
 def _parser():
-    parser = argparse.ArgumentParser(
+    parser = _cli.Parser(
         prog="python -m labutils.sfm",
         description="Incremental structure from motion from VGG-format tracks and known calibration.")
     parser.add_argument("tracks", help="track file: one row per track, 'x y' per view, -1 -1 where unseen")

@@ -15,6 +15,7 @@ from scipy.optimize import least_squares
 
 from labutils._cli import CommandError
 from labutils._cli import write_all_atomically as write_atomically
+from labutils.calibrate import main
 from labutils.calibration import CalibrationProblem, _intrinsic_map, calibrate_camera, calibrate_stereo, view_influence
 from labutils.chessboard import (
     board_points,
@@ -25,7 +26,6 @@ from labutils.chessboard import (
     render_board_views,
     synthetic_board_views,
 )
-from labutils.calibrate import main
 from labutils.datapath import DataNotFoundError
 from labutils.formats import read_calibration
 from labutils.geometry import rotation_from_angle_axis
