@@ -314,8 +314,8 @@ def bundle_adjust(R: ArrayLike, t: ArrayLike, X: ArrayLike, camera_indices: Arra
         LM-Schur minimises the same objective, by iteratively reweighted least squares (weights ``ρ'``)
         while far from the optimum, then with the exact second-order curvature of the loss
         ``ρ' + 2zρ''`` (floored at ``0.01 ρ'``) once the cost decrease slows below 1e-3 relative: IRLS
-        alone converges linearly near the optimum (measured on the dinosaur with ``soft_l1``: 46
-        iterations instead of 12), the exact curvature alone stalls from a far start. scipy gets
+        alone converges only linearly near the optimum (several times the iterations on the dinosaur), the exact
+        curvature alone stalls from a far start. scipy gets
         the same two phases (two calls of ``least_squares`` with the loss as a callable), unless
         ``scipy_options`` names a ``loss`` of its own.
     f_scale : float
@@ -345,8 +345,8 @@ def bundle_adjust(R: ArrayLike, t: ArrayLike, X: ArrayLike, camera_indices: Arra
         For ``solver='scipy'``: the Jacobian it uses (see ``solver``).
     scipy_options : dict, optional
         Extra keywords for :func:`scipy.optimize.least_squares`, e.g. ``dict(tr_options=dict(atol=1e-10,
-        btol=1e-10))``: tighter LSMR tolerances make each step dearer but far fewer steps are needed on
-        bundle-adjustment problems (measured on the dinosaur: 86 instead of > 1000 iterations).
+        btol=1e-10))``: tighter LSMR tolerances make each step dearer and change how many steps are needed
+        (``python -m labutils.bench ba`` compares both).
     verbose : bool
         Print one line per iteration (cost, step, damping), the way Ceres reports.
 

@@ -90,8 +90,8 @@ def detect_corners(image, board=(9, 6), *, refine=True, max_side=800):
         Run ``cornerSubPix``.
     max_side : int
         Larger images (a phone's 12 megapixels) are searched for the board at this size: OpenCV's detector slows down
-        steeply with the image size (measured: 0.02 s at 640×480, 7 s at 1600×1200 for the same board). The corners
-        are then refined at full resolution.
+        steeply with the image size (by orders of magnitude from 640×480 to a few megapixels). The corners are then
+        refined at full resolution.
 
     Returns
     -------
