@@ -27,6 +27,7 @@ requirements without the developer tools; ``labutils`` itself comes from where t
 """
 import ast
 import copy
+import os
 import re
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -460,9 +461,25 @@ def release_files(notebooks, outdir, *, force=False, labutils=None, progress=Non
     parent = outdir.resolve().parent
     if not outdir.exists() and not parent.is_dir():
         raise ValueError(f"{outdir}: its folder {parent} does not exist")
+    if outdir.exists() and not os.access(outdir, os.W_OK | os.X_OK):
+        raise ValueError(f"{outdir}: the folder is not writable")
+    if not outdir.exists() and not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{outdir}: cannot make it: {parent} is not writable")
     sources = {Path(p).resolve().parent for p in notebooks}
     if outdir.resolve() in sources:
         raise ValueError(f"{outdir}: is the folder of the instructor notebooks; the student edition goes elsewhere")
+    env = _environment_text(notebooks[0]) if notebooks else None
+    targets = [outdir / Path(p).name for p in notebooks] + [outdir / "README.md"]
+    targets += [outdir / "requirements.txt"] if env is not None else []
+    for target in targets:                                # before any work: what is there may not be replaced
+        if target.exists():
+            if target.is_dir():
+                raise ValueError(f"{target}: is a folder")
+            if not force:
+                raise ValueError(f"{target}: already exists ({outdir} holds a student edition?); --force replaces it")
+            if not _is_ours(target):
+                raise ValueError(f"{target}: exists and is not from a student edition; not replacing it, even with "
+                                 "--force")
     files, rows = {}, []
     for path in notebooks:
         path = Path(path)
@@ -476,16 +493,6 @@ def release_files(notebooks, outdir, *, force=False, labutils=None, progress=Non
         if progress is not None:
             progress.step(note=path.name)
     files[outdir / "README.md"] = student_readme(rows)
-    env = _environment_text(notebooks[0]) if notebooks else None
     if env is not None:
         files[outdir / "requirements.txt"] = student_requirements(env, labutils)
-    for target in files:
-        if target.exists():
-            if target.is_dir():
-                raise ValueError(f"{target}: is a folder")
-            if not force:
-                raise ValueError(f"{target}: already exists ({outdir} holds a student edition?); --force replaces it")
-            if not _is_ours(target):
-                raise ValueError(f"{target}: exists and is not from a student edition; not replacing it, even with "
-                                 "--force")
     return files, rows
