@@ -236,7 +236,7 @@ def test_only_exercise_cells_change(edition, name):
     for k, (a, b) in enumerate(zip(instructor.cells, student.cells), 1):
         assert a.cell_type == b.cell_type
         meta = _meta(a)
-        if meta.get("solution") or (meta.get("grade") and any(b_ in a.source for b_ in BEGINS)):
+        if meta.get("solution") or meta.get("task") or (meta.get("grade") and any(b_ in a.source for b_ in BEGINS)):
             assert b.metadata.get("deletable") is False and "checksum" in _meta(b), f"{name}, cell {k}"
             if meta.get("grade") and not meta.get("solution"):
                 assert b.metadata.get("editable") is False, f"{name}, cell {k}"
@@ -267,8 +267,12 @@ def test_output_is_what_nbgrader_generate_assignment_writes(tmp_path, edition):
         if ours:
             c.GenerateAssignment.preprocessors = student_preprocessors()
         converter = GenerateAssignment(coursedir=CourseDirectory(config=c), config=c)
+        level = converter.log.level
         converter.log.setLevel("ERROR")
-        converter.start()
+        try:
+            converter.start()
+        finally:
+            converter.log.setLevel(level)
         for p in chosen:
             theirs = (tmp_path / "release" / "lab" / p.name).read_text()
             mine = (out / p.name).read_text()

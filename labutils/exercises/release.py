@@ -370,8 +370,9 @@ In a fresh virtual environment (`python3 -m venv .venv && source .venv/bin/activ
     pip install -r requirements.txt
     jupyter lab
 
-`requirements.txt` installs the workbook's package `labutils` (the estimators, data loaders and plots the
-notebooks import) and JupyterLab. If its last line is a comment, install `labutils` as your course says.
+`requirements.txt` installs JupyterLab and the workbook's package `labutils` (the estimators, data loaders and
+plots the notebooks import). Where it has a comment instead of a `labutils` line, install `labutils` as your course
+says.
 
 **The data.** The notebooks use real data sets (the Oxford dinosaur and others). Choose a folder for them and fetch
 them once:
@@ -390,7 +391,7 @@ Without the data every notebook still runs: it says so and uses a synthetic scen
 2. **Run the self-check below it.** It tries your function on a few cases and prints `pass`, or a hint that names
    the likely mistake. Until you have written the function it says "not written yet".
 3. **The autograded test cell** after it looks empty (a comment): its tests are hidden and run when your work is
-   graded. It passes when your function does what the self-check asks, and more.
+   graded: the self-check's cases, and more.
 4. **The notebook goes on** with the library's version of the function, so you are never stuck: the rest of the
    notebook runs whether or not your function is done.
 
