@@ -398,6 +398,9 @@ Without the data every notebook still runs: it says so and uses a synthetic scen
 **Written questions** are cells that say `YOUR ANSWER HERE`: replace that text by your answer (Markdown and
 equations are fine).
 
+If your course uses nbgrader's *Validate* button: it cannot see the hidden tests, so it reports success even for an
+exercise you have not written; the self-checks are what tell you how you are doing.
+
 Do not delete, copy or split the exercise, test and answer cells, and do not edit the locked ones: the grader finds
 them by their metadata, and restores the tests from its own copy. Add cells of your own anywhere you like.
 
