@@ -196,7 +196,7 @@ def test_release_writes_every_notebook_readme_and_requirements(edition):
     assert "NotImplementedError" in readme and "LABUTILS_DATA" in readme
     req = (out / "requirements.txt").read_text()
     assert "numpy" in req and "jupyterlab" in req and "-e ." not in req
-    assert not re.search(r"^(pytest|nbval|ruff|nbstripout|nbgrader)\b", req, re.M), req
+    assert not re.search(r"^(pytest|pytest-xdist|nbval|ruff|nbstripout|nbgrader)\b", req, re.M), req
 
 
 # ---------------------------------------------------------------------------------------------------------------

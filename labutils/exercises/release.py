@@ -51,7 +51,7 @@ DELIMITERS = {                      # nbgrader's default delimiters, the regions
 }
 README_MARK = "<!-- student edition: made by python -m labutils.exercises release -->"
 REQUIREMENTS_MARK = "# student edition: made by python -m labutils.exercises release"
-DEVELOPER_ONLY = {"nbval", "pytest", "nbstripout", "ruff", "nbgrader"}    # the suite's tools, not the student's
+DEVELOPER_ONLY = {"nbval", "pytest", "pytest-xdist", "nbstripout", "ruff", "nbgrader"}    # the suite's tools
 
 
 # ---------------------------------------------------------------------------------------------------------------
