@@ -69,7 +69,7 @@ def _lab_cells(image, lightness_weight):
     import cv2
 
     lab = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2LAB)
-    L = (lab[..., 0] * np.float32(lightness_weight * 100.0 / 255.0)).astype(np.int32)
+    L = np.floor(lab[..., 0] * (lightness_weight * 100.0 / 255.0) + 1e-9).astype(np.int32)   # exact products: not 15.99
     return (L << 16) | (lab[..., 1].astype(np.int32) << 8) | lab[..., 2].astype(np.int32)
 
 

@@ -101,7 +101,7 @@ def read_par(path, *, check_images=True, rotation_tol=1e-6):
         ts.append(t)
         paths.append(img)
     if len(paths) < n:
-        raise ValueError(f"{path}: line 1 announces {n} images; the file lists {len(paths)}")
+        raise ValueError(f"{path}, line 1: {n} images announced; the file lists {len(paths)}")
     return Views(name=path.stem, K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths)
 
 
