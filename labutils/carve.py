@@ -15,6 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from .carving import (
@@ -45,8 +46,6 @@ def _log(quiet, *parts):
 
 
 def _read_images(views):
-    import cv2
-
     images = []
     for path in views.image_paths:
         img = cv2.imread(str(path), cv2.IMREAD_COLOR)
@@ -159,8 +158,6 @@ def _compute(args, views, images, par):
 
 def _write(args, out, out_dir, masks_dir, views, masks, vertices, faces, normals, grid, threshold, par):
     """Write everything to temporary files first, then rename them all: nothing is left half-written."""
-    import cv2
-
     temps = []
     try:
         tmp = _temporary(out_dir, out.name)

@@ -29,7 +29,7 @@ from labutils.carving import (
     silhouette_ious,
     surface_mesh,
 )
-from labutils.carving_scene import make_snowman
+from labutils.carving.synthetic import make_snowman
 from labutils.middlebury import read_par, write_par
 from labutils.ply import read_model, validate_ply
 

@@ -2,7 +2,7 @@
 import numpy as np
 
 from ..carving import inside_silhouette, mask_iou
-from ..carving_scene import make_snowman
+from ..carving.synthetic import make_snowman
 from . import run_checks
 
 __all__ = ["check_silhouette_from_colour", "check_carve_step", "check_mask_iou"]

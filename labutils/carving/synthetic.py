@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .synthetic import look_at
+from ..synthetic import look_at
 
 __all__ = ["CarvingScene", "make_snowman", "rays_hit_spheres"]
 
