@@ -85,7 +85,7 @@ def test_bad_input_raises_naming_the_argument(scene):
         carve(masks, P, scene.box)
     with pytest.raises(ValueError, match="box must be"):
         VoxelGrid.from_box([[0, 0, 0], [1, 0, 1]], 10)
-    with pytest.raises(ValueError, match="n .* must be an integer >= 2"):
+    with pytest.raises(ValueError, match=r"n \(voxels along the longest side\) must be >= 2"):
         VoxelGrid.from_box(scene.box, 1)
     with pytest.raises(ValueError, match=r"image must be an RGB image, a \(H, W, 3\) uint8 array"):
         colour_distance(scene.images[0].astype(float), background_model(scene.images[:2]))
@@ -99,6 +99,24 @@ def test_bad_input_raises_naming_the_argument(scene):
         inside_silhouette(np.zeros((4, 2)), P[0], masks[0])
     with pytest.raises(ValueError, match="faces hold vertex indices"):
         render_silhouette(np.zeros((3, 3)) + [0, 0, 0.3], [[0, 1, 3]], P[0], (20, 10))
+    with pytest.raises(ValueError, match="image_size must be"):
+        render_silhouette(np.eye(3) + [0, 0, 3], [[0, 1, 2]], P[0], (20, -1))
+    model = background_model(scene.images[:2])
+    for call, message in [
+        (lambda: silhouette(scene.images[0], model, threshold=np.nan), "threshold must be a finite number"),
+        (lambda: silhouette(scene.images[0], model, threshold=-1), "threshold must be >= 0"),
+        (lambda: colour_distance(scene.images[0], "blue"), "model must be a BackgroundModel"),
+        (lambda: background_model(scene.images[:2], border_px=0), "border_px must be >= 1"),
+        (lambda: background_model(scene.images[:2], lightness_weight=0), "lightness_weight must be > 0"),
+        (lambda: background_model([]), "images is empty"),
+        (lambda: clean_mask(masks[0], min_component=2), "min_component must be <= 1"),
+        (lambda: VoxelGrid.from_box(scene.box, "many"), "n .* must be a number"),
+        (lambda: carve(masks, P, grid, band_voxels=0), "band_voxels must be > 0"),
+        (lambda: surface_mesh(masks), "carving must be a Carving"),
+        (lambda: choose_threshold([np.zeros((4, 4))] * 16, P, candidates=()), "candidates is empty"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            call()
 
 
 def test_behind_the_camera_and_outside_the_image():

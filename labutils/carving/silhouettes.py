@@ -10,6 +10,21 @@ __all__ = ["BackgroundModel", "background_model", "colour_distance", "clean_mask
            "signed_distance_map", "mask_iou"]
 
 
+def _as_number(value, name, *, lo=None, hi=None, integer=False, open_lo=False):
+    """A finite float (or int) within [lo, hi] (``open_lo``: lo excluded), else ``ValueError`` naming ``name``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number; got {value!r}") from None
+    if not np.isfinite(v) or (integer and v != int(v)):
+        raise ValueError(f"{name} must be a finite {'integer' if integer else 'number'}; got {value!r}")
+    if lo is not None and (v < lo or (open_lo and v == lo)):
+        raise ValueError(f"{name} must be {'>' if open_lo else '>='} {lo:g}; got {value!r}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{name} must be <= {hi:g}; got {value!r}")
+    return int(v) if integer else v
+
+
 def _as_image(image, name="image"):
     a = np.asarray(image)
     if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
@@ -97,8 +112,9 @@ def background_model(images, *, border_px=4, lightness_weight=0.3, min_count=3):
     >>> bool(d[20, 20] > 50), float(d[0, 0])
     (True, 0.0)
     """
-    if not 0 < lightness_weight <= 1:
-        raise ValueError(f"lightness_weight must be in (0, 1]; got {lightness_weight}")
+    lightness_weight = _as_number(lightness_weight, "lightness_weight", lo=0, hi=1, open_lo=True)
+    border_px = _as_number(border_px, "border_px", lo=1, integer=True)
+    min_count = _as_number(min_count, "min_count", lo=1)
     images = list(images)
     if not images:
         raise ValueError("images is empty: the background is learnt from at least one image")
@@ -132,6 +148,8 @@ def colour_distance(image, model):
     (H, W) float32 ndarray
         0 on colours seen at the borders; large on the object.
     """
+    if not isinstance(model, BackgroundModel):
+        raise ValueError(f"model must be a BackgroundModel (from background_model); got {type(model).__name__}")
     return model.distance.ravel()[_lab_cells(_as_image(image), model.lightness_weight)]
 
 
@@ -159,6 +177,8 @@ def clean_mask(mask, *, min_component=0.02, max_hole=0.002):
     (True, False, 400)
     """
     mask = _as_mask(mask)
+    min_component = _as_number(min_component, "min_component", lo=0, hi=1)
+    max_hole = _as_number(max_hole, "max_hole", lo=0, hi=1)
     n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     if n <= 1:
         return mask.copy()
@@ -191,6 +211,7 @@ def silhouette(image, model, *, threshold=2.5, min_component=0.02, max_hole=0.00
     -------
     (H, W) bool ndarray
     """
+    threshold = _as_number(threshold, "threshold", lo=0)
     return clean_mask(colour_distance(image, model) > threshold, min_component=min_component, max_hole=max_hole)
 
 

@@ -4,8 +4,16 @@ import numpy as np
 from skimage.measure import marching_cubes
 
 from .._validation import as_points
-from .silhouettes import clean_mask, mask_iou, signed_distance_map
-from .voxels import VoxelGrid, _as_cameras, _carve_maps, _check_masks, bounding_box_from_silhouettes, project_with_depth
+from .silhouettes import _as_number, clean_mask, mask_iou, signed_distance_map
+from .voxels import (
+    Carving,
+    VoxelGrid,
+    _as_cameras,
+    _carve_maps,
+    _check_masks,
+    bounding_box_from_silhouettes,
+    project_with_depth,
+)
 
 __all__ = ["surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious", "THRESHOLD_CANDIDATES",
            "choose_threshold"]
@@ -39,6 +47,10 @@ def surface_mesh(carving, *, level=0.0, step_size=1):
     ValueError
         If nothing is occupied (every voxel was carved away).
     """
+    if not isinstance(carving, Carving):
+        raise ValueError(f"carving must be a Carving (from carve); got {type(carving).__name__}")
+    level = _as_number(level, "level")
+    step_size = _as_number(step_size, "step_size", lo=1, integer=True)
     if not carving.occupied.any():
         raise ValueError("every voxel was carved away: there is no surface (the masks or cameras disagree)")
     f = np.pad(carving.field, 1, constant_values=-carving.band)
@@ -101,7 +113,9 @@ def render_silhouette(vertices, faces, P, image_size):
         raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
     if F.size and (F.min() < 0 or F.max() >= len(V)):
         raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
-    w, h = (int(v) for v in image_size)
+    if np.shape(image_size) != (2,):
+        raise ValueError(f"image_size must be (width, height); got {image_size!r}")
+    w, h = (_as_number(v, "image_size", lo=1, integer=True) for v in image_size)
     if F.size == 0:
         return np.zeros((h, w), bool)
     x, depth = project_with_depth(P, V)
@@ -193,7 +207,11 @@ def choose_threshold(distances, P, *, candidates=THRESHOLD_CANDIDATES, n=40, eve
     distances = list(distances)
     if len(distances) != len(P):
         raise ValueError(f"distances has {len(distances)} maps for {len(P)} cameras: one per view")
-    candidates = sorted(float(c) for c in candidates)
+    candidates = sorted(_as_number(c, "candidates", lo=0) for c in candidates)
+    if not candidates:
+        raise ValueError("candidates is empty: give at least one threshold")
+    n = _as_number(n, "n", lo=4, integer=True)
+    every = _as_number(every, "every", lo=1, integer=True)
     masks_of = {c: [clean_mask(d > c, min_component=min_component, max_hole=max_hole) for d in distances]
                 for c in candidates}
     box = bounding_box_from_silhouettes(masks_of[candidates[0]], P)    # the most inclusive masks: the largest box

@@ -7,7 +7,7 @@ import numpy as np
 
 from .._validation import as_matrix, as_points
 from ..geometry import KRt_from_P
-from .silhouettes import _as_mask, signed_distance_map
+from .silhouettes import _as_mask, _as_number, signed_distance_map
 
 __all__ = ["VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve", "bounding_box_from_silhouettes"]
 
@@ -44,8 +44,7 @@ class VoxelGrid:
         size = box[1] - box[0]
         if np.any(size <= 0):
             raise ValueError(f"box must be [min corner, max corner] with max > min on every axis; got {box.tolist()}")
-        if int(n) != n or n < 2:
-            raise ValueError(f"n (voxels along the longest side) must be an integer >= 2; got {n}")
+        n = _as_number(n, "n (voxels along the longest side)", lo=2, integer=True)
         s = float(size.max() / n)
         shape = tuple(int(v) for v in np.maximum(np.ceil(size / s - 1e-9), 1))
         centre = box.mean(axis=0)
@@ -240,6 +239,7 @@ def carve(masks, P, grid, *, band_voxels=2.0, progress=None):
     masks = _check_masks(masks, len(P))
     if not isinstance(grid, VoxelGrid):
         raise ValueError(f"grid must be a VoxelGrid; got {type(grid).__name__}")
+    band_voxels = _as_number(band_voxels, "band_voxels", lo=0, open_lo=True)
     return _carve_maps([signed_distance_map(m) for m in masks], P, grid, band_voxels, progress)
 
 
@@ -330,6 +330,9 @@ def bounding_box_from_silhouettes(masks, P, *, n=40, margin_voxels=1.5, rounds=3
     """
     P = _as_cameras(P)
     masks = _check_masks(masks, len(P))
+    n = _as_number(n, "n", lo=4, integer=True)
+    margin_voxels = _as_number(margin_voxels, "margin_voxels", lo=0)
+    rounds = _as_number(rounds, "rounds", lo=1, integer=True)
     C = np.array([_camera_centre(Pv) for Pv in P])
     rays, rects = [], []
     for v, (Pv, mask) in enumerate(zip(P, masks)):
