@@ -124,7 +124,7 @@ def _compute(args, views, images, par):
     distances = [colour_distance(img, model) for img in images]
     threshold = args.threshold
     if threshold is None:
-        threshold, scores = choose_threshold(distances, P, every=2)
+        threshold, scores = choose_threshold(distances, P, every=3)
         table = ", ".join(f"{c:g}: {s:.3f}" for c, s in zip(THRESHOLD_CANDIDATES, scores[:, 0]))
         _log(args.quiet, f"carve: colour threshold {threshold:g} (silhouette agreement, median IoU on a coarse "
                          f"grid: {table}) [{time.perf_counter() - t0:.1f} s]")
