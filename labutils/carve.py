@@ -186,7 +186,7 @@ def _write(args, out, out_dir, masks_dir, views, masks, vertices, faces, normals
         raise
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (0, or 2 after one ``error: ...`` line on stderr)."""
     parser = argparse.ArgumentParser(
         prog="python -m labutils.carve",

@@ -9,16 +9,19 @@ one line per image::
 with ``P = K [R | t]`` mapping world points to pixels (origin top-left, x right, y down): our convention.
 Image names are relative to the file's folder.
 """
+import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .data import Views
 
 __all__ = ["read_par", "write_par"]
 
 
-def read_par(path, *, check_images=True, rotation_tol=1e-6):
+def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol: float = 1e-6) -> Views:
     """Read a Middlebury camera file into a :class:`labutils.data.Views` (K, R, t and image paths per view).
 
     Parameters
@@ -113,7 +116,7 @@ def _is_float(s):
         return False
 
 
-def write_par(path, names, K, R, t):
+def write_par(path: str | os.PathLike, names: Sequence[str], K: ArrayLike, R: ArrayLike, t: ArrayLike) -> None:
     """Write cameras as a Middlebury camera file (the inverse of :func:`read_par`).
 
     Parameters

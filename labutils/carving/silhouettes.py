@@ -1,9 +1,11 @@
 """Silhouettes from colour: the background's colours learnt from the image borders, each pixel's distance to them,
 a cleaned mask; the signed distance to a mask's boundary; the IoU of two masks."""
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import ndimage
 
 __all__ = ["BackgroundModel", "background_model", "colour_distance", "clean_mask", "silhouette",
@@ -83,7 +85,8 @@ def _border_pixels(image, border_px):
     return np.concatenate([image[:b].ravel(), image[-b:].ravel(), image[b:-b, :b].ravel(), image[b:-b, -b:].ravel()])
 
 
-def background_model(images, *, border_px=4, lightness_weight=0.3, min_count=3):
+def background_model(images: Sequence[ArrayLike], *, border_px: int = 4, lightness_weight: float = 0.3,
+                     min_count: float = 3) -> BackgroundModel:
     """Learn the background's colours from a frame ``border_px`` wide around every image.
 
     The colours seen there (in CIELAB, lightness scaled by ``lightness_weight``) mark cells of a 1-unit grid; a
@@ -135,7 +138,7 @@ def background_model(images, *, border_px=4, lightness_weight=0.3, min_count=3):
     return BackgroundModel(dist, float(lightness_weight), int(len(X)))
 
 
-def colour_distance(image, model):
+def colour_distance(image: ArrayLike, model: BackgroundModel) -> np.ndarray:
     """Distance (CIELAB units, lightness weighted) of each pixel's colour to the nearest background colour.
 
     Parameters
@@ -153,7 +156,7 @@ def colour_distance(image, model):
     return model.distance.ravel()[_lab_cells(_as_image(image), model.lightness_weight)]
 
 
-def clean_mask(mask, *, min_component=0.02, max_hole=0.002):
+def clean_mask(mask: ArrayLike, *, min_component: float = 0.02, max_hole: float = 0.002) -> np.ndarray:
     """Remove small specks and fill small holes of a silhouette.
 
     Parameters
@@ -194,7 +197,8 @@ def clean_mask(mask, *, min_component=0.02, max_hole=0.002):
     return out | (fill[lab] & ~out)
 
 
-def silhouette(image, model, *, threshold=2.5, min_component=0.02, max_hole=0.002):
+def silhouette(image: ArrayLike, model: BackgroundModel, *, threshold: float = 2.5, min_component: float = 0.02,
+               max_hole: float = 0.002) -> np.ndarray:
     """The object's silhouette: pixels whose colour is farther than ``threshold`` from every background colour.
 
     Parameters
@@ -215,7 +219,7 @@ def silhouette(image, model, *, threshold=2.5, min_component=0.02, max_hole=0.00
     return clean_mask(colour_distance(image, model) > threshold, min_component=min_component, max_hole=max_hole)
 
 
-def signed_distance_map(mask):
+def signed_distance_map(mask: ArrayLike) -> np.ndarray:
     """Signed distance of each pixel to the silhouette's boundary, pixels: positive inside, negative outside.
 
     Pixels next to the boundary get ±½ (the boundary runs between pixel centres); outside the image counts
@@ -236,7 +240,7 @@ def signed_distance_map(mask):
     return np.where(mask, d_in - 0.5, 0.5 - d_out).astype(np.float32)
 
 
-def mask_iou(a, b):
+def mask_iou(a: ArrayLike, b: ArrayLike) -> float:
     """Intersection over union of two masks: ``|a ∧ b| / |a ∨ b|``, in [0, 1].
 
     Raises

@@ -1,6 +1,9 @@
 """The carved volume's surface (marching cubes, scikit-image), a mesh's silhouette in a view and its IoU with the
 masks, and the colour threshold chosen by how well the silhouettes agree."""
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 from skimage.measure import marching_cubes
 
 from .._validation import as_points
@@ -19,7 +22,8 @@ __all__ = ["surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious"
            "choose_threshold"]
 
 
-def surface_mesh(carving, *, level=0.0, step_size=1):
+def surface_mesh(carving: Carving, *, level: float = 0.0, step_size: int = 1
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The carved volume's surface by marching cubes (scikit-image; Lorensen & Cline 1987; Lewiner et al. 2003).
 
     The field is padded by one voxel of "outside" on every side, so the surface is closed even where the hull
@@ -64,7 +68,7 @@ def surface_mesh(carving, *, level=0.0, step_size=1):
     return verts, faces, normals
 
 
-def mesh_volume(vertices, faces):
+def mesh_volume(vertices: ArrayLike, faces: ArrayLike) -> float:
     """Signed volume of a closed triangle mesh (positive when the faces are counter-clockwise seen from outside).
 
     >>> V = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
@@ -75,7 +79,7 @@ def mesh_volume(vertices, faces):
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
-def render_silhouette(vertices, faces, P, image_size):
+def render_silhouette(vertices: ArrayLike, faces: ArrayLike, P: ArrayLike, image_size: tuple[int, int]) -> np.ndarray:
     """The silhouette of a triangle mesh in a view: the pixels whose centre falls in a projected triangle.
 
     Vectorised scan conversion: for every (triangle, pixel row) pair the row's span inside the triangle is found
@@ -156,7 +160,7 @@ def _fill_triangles(tri, h, w, eps=1e-9):
     return np.cumsum(cover.reshape(h, w + 1), axis=1)[:, :w] > 0
 
 
-def silhouette_ious(vertices, faces, masks, P):
+def silhouette_ious(vertices: ArrayLike, faces: ArrayLike, masks: Sequence[ArrayLike], P: ArrayLike) -> np.ndarray:
     """Per view: the IoU of the mesh's silhouette (:func:`render_silhouette`) with that view's mask.
 
     Returns
@@ -172,8 +176,9 @@ THRESHOLD_CANDIDATES = (0.5, 1.5, 2.5, 3.5, 5.0)
 """Colour thresholds tried by :func:`choose_threshold` (CIELAB units, lightness weighted)."""
 
 
-def choose_threshold(distances, P, *, candidates=THRESHOLD_CANDIDATES, n=40, every=1, min_component=0.02,
-                     max_hole=0.002):
+def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, *,
+                     candidates: Sequence[float] = THRESHOLD_CANDIDATES, n: int = 40, every: int = 1,
+                     min_component: float = 0.02, max_hole: float = 0.002) -> tuple[float, np.ndarray]:
     """Pick the colour threshold whose silhouettes agree best with each other (no ground truth needed).
 
     With exact cameras, the visual hull of perfect silhouettes reprojects exactly onto each of them; a mask that

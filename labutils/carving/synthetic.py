@@ -6,9 +6,11 @@ tests and as notebook 11's fallback when the real data is missing.
 
 Every random choice comes from the ``rng`` argument (a ``numpy.random.Generator``).
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..synthetic import look_at
 
@@ -67,13 +69,13 @@ class CarvingScene:
         s = self.spheres
         return np.array([(s[:, :3] - s[:, 3:]).min(axis=0), (s[:, :3] + s[:, 3:]).max(axis=0)])
 
-    def inside_object(self, X):
+    def inside_object(self, X: ArrayLike) -> np.ndarray:
         """(N,) bool: which points lie inside a sphere."""
         X = np.asarray(X, float)
         d = np.linalg.norm(X[:, None, :] - self.spheres[None, :, :3], axis=2)
         return np.any(d < self.spheres[None, :, 3], axis=1)
 
-    def inside_hull(self, X):
+    def inside_hull(self, X: ArrayLike) -> np.ndarray:
         """(N,) bool: which points lie in the exact visual hull (their ray hits the object in every view)."""
         X = np.asarray(X, float)
         out = np.ones(len(X), bool)
@@ -82,7 +84,7 @@ class CarvingScene:
         return out
 
 
-def rays_hit_spheres(C, d, spheres):
+def rays_hit_spheres(C: ArrayLike, d: ArrayLike, spheres: ArrayLike) -> np.ndarray:
     """Which rays ``C + s d`` (s > 0) hit at least one sphere.
 
     Parameters
@@ -109,8 +111,9 @@ def rays_hit_spheres(C, d, spheres):
     return hit
 
 
-def make_snowman(n_views=24, *, rng, image_size=(320, 240), f=420.0, distance=3.0, elevations=(15.0, 45.0),
-                 noise=2.0, spheres=None):
+def make_snowman(n_views: int = 24, *, rng: np.random.Generator, image_size: tuple[int, int] = (320, 240),
+                 f: float = 420.0, distance: float = 3.0, elevations: Sequence[float] = (15.0, 45.0),
+                 noise: float = 2.0, spheres: ArrayLike | None = None) -> CarvingScene:
     """Cameras on rings around a snowman of spheres, its images and its exact silhouettes.
 
     Parameters

@@ -1,9 +1,11 @@
 """The voxel grid, projecting voxel centres with their depth, carving them against the silhouettes (with a signed
 distance field whose zero level is the hull's surface), and finding the object's box from the silhouettes alone."""
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import as_matrix, as_points
 from ..geometry import KRt_from_P
@@ -38,7 +40,7 @@ class VoxelGrid:
     shape: tuple
 
     @classmethod
-    def from_box(cls, box, n):
+    def from_box(cls, box: ArrayLike, n: int) -> "VoxelGrid":
         """A grid over ``box`` ((2, 3): min and max corner) with ``n`` voxels along its longest side."""
         box = as_matrix(box, "box", (2, 3))
         size = box[1] - box[0]
@@ -60,7 +62,7 @@ class VoxelGrid:
         """(2, 3): the grid's min and max corner."""
         return np.array([self.lo, self.lo + self.voxel_size * np.array(self.shape)])
 
-    def centres(self, index=None):
+    def centres(self, index: ArrayLike | None = None) -> np.ndarray:
         """World coordinates of voxel centres: all ``(n_voxels, 3)`` in C order, or those of flat ``index``."""
         index = np.arange(self.n_voxels) if index is None else np.asarray(index)
         ijk = np.stack(np.unravel_index(index, self.shape), axis=-1)
@@ -111,7 +113,7 @@ def _as_cameras(P, name="P"):
     return P
 
 
-def project_with_depth(P, X):
+def project_with_depth(P: ArrayLike, X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Pixels and depths of world points ``X`` (N, 3) in camera ``P`` (3, 4) (H&Z Sec. 6.2.3).
 
     The depth is ``sign(det M) w / ‖m³‖`` (M the left 3×3 block of P, m³ its third row, w the third coordinate
@@ -143,7 +145,7 @@ def project_with_depth(P, X):
     return x, np.sign(det) * w / np.linalg.norm(M[2])
 
 
-def inside_silhouette(X, P, mask):
+def inside_silhouette(X: ArrayLike, P: ArrayLike, mask: ArrayLike) -> np.ndarray:
     """The carving test of one view: which points project inside the silhouette (nearest pixel), in front.
 
     Parameters
@@ -187,7 +189,8 @@ def _check_masks(masks, n_views):
     return [_as_mask(m, f"masks[{i}]") for i, m in enumerate(masks)]
 
 
-def carve(masks, P, grid, *, band_voxels=2.0, progress=None):
+def carve(masks: Sequence[ArrayLike], P: ArrayLike, grid: VoxelGrid, *, band_voxels: float = 2.0,
+          progress: Callable[[int, int], None] | None = None) -> Carving:
     """Carve the visual hull: keep the voxels whose centre projects inside every silhouette.
 
     One pass per view over the voxels still alive (vectorised); a voxel farther than ``band_voxels`` outside a
@@ -301,7 +304,8 @@ def _closest_point_to_rays(C, d):
     return np.linalg.solve(A, b)
 
 
-def bounding_box_from_silhouettes(masks, P, *, n=40, margin_voxels=1.5, rounds=3):
+def bounding_box_from_silhouettes(masks: Sequence[ArrayLike], P: ArrayLike, *, n: int = 40, margin_voxels: float = 1.5,
+                                  rounds: int = 3) -> np.ndarray:
     """The box around the visual hull, found from the silhouettes and cameras alone.
 
     1. The rays through the silhouettes' centroids meet (in the least-squares sense) near the object: X0.

@@ -109,7 +109,7 @@ def _header_bytes(data, source):
     return text.split("\n")[:-1] if text.endswith("\n") else text.split("\n"), n
 
 
-def parse_header(data, source="<header>"):
+def parse_header(data: bytes | str, source: str = "<header>") -> PlyHeader:
     """Check a PLY header against the format's rules and parse it (Turk 1994).
 
     Parameters

@@ -1,10 +1,11 @@
 """Reading PLY files: any elements and properties (ASCII, binary little or big endian), and point clouds or meshes."""
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .header import _FORMATS, _np_type, parse_header
+from .header import _FORMATS, PlyHeader, _np_type, parse_header
 from .write import _colors
 
 
@@ -228,7 +229,7 @@ def _read_binary_element(e, body, pos, order, source):
             for p in e.properties}, pos
 
 
-def read_ply(path):
+def read_ply(path: str | os.PathLike) -> tuple[PlyHeader, dict[str, dict[str, np.ndarray]]]:
     """Read any PLY file: its header and, per element, one array per property.
 
     Parameters
@@ -276,7 +277,7 @@ def read_ply(path):
     return header, _read_binary(header, body, source)
 
 
-def validate_ply(path):
+def validate_ply(path: str | os.PathLike) -> PlyHeader:
     """Check a PLY file against the format: its header's rules, and data matching the header exactly.
 
     Returns the :class:`PlyHeader` when the file is valid; raises ``ValueError`` naming the file and the header
@@ -295,7 +296,7 @@ def validate_ply(path):
 
 
 
-def read_model(path):
+def read_model(path: str | os.PathLike) -> PlyModel:
     """Read a point cloud or a mesh written by :func:`write_points` / :func:`write_mesh` (or any similar PLY).
 
     Needs an element ``vertex`` with ``x y z``; reads ``nx ny nz`` and ``red green blue`` when all three are

@@ -2,9 +2,11 @@
 import os
 import re
 import tempfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import as_points
 from .header import _FORMATS, _NAME_OF, PLY_TYPES, PlyElement, PlyHeader, PlyProperty, _np_type
@@ -93,7 +95,9 @@ def _write_atomic(path, chunks):
         raise
 
 
-def write_ply(path, elements, *, format="binary_little_endian", comments=(), types=None):
+def write_ply(path: str | os.PathLike, elements: Mapping[str, Mapping[str, ArrayLike]], *,
+              format: str = "binary_little_endian", comments: Sequence[str] = (),
+              types: Mapping[tuple[str, str], str] | None = None) -> None:
     """Write any elements and properties as a PLY file (atomically: a temporary file renamed into place).
 
     Parameters
@@ -292,8 +296,9 @@ def _vertex_props(X, colors, normals, coord_type, name):
     return X, props
 
 
-def write_points(path, X, colors=None, normals=None, *, format="binary_little_endian", coord_type="float",
-                 comments=()):
+def write_points(path: str | os.PathLike, X: ArrayLike, colors: ArrayLike | None = None,
+                 normals: ArrayLike | None = None, *, format: str = "binary_little_endian", coord_type: str = "float",
+                 comments: Sequence[str] = ()) -> None:
     """Write a point cloud: ``x y z``, optional ``nx ny nz`` (float) and ``red green blue`` (uchar) per vertex.
 
     Parameters
@@ -330,8 +335,9 @@ def write_points(path, X, colors=None, normals=None, *, format="binary_little_en
     write_ply(path, {"vertex": props}, format=format, comments=comments)
 
 
-def write_mesh(path, vertices, faces, colors=None, normals=None, *, format="binary_little_endian",
-               coord_type="float", comments=()):
+def write_mesh(path: str | os.PathLike, vertices: ArrayLike, faces: ArrayLike, colors: ArrayLike | None = None,
+               normals: ArrayLike | None = None, *, format: str = "binary_little_endian", coord_type: str = "float",
+               comments: Sequence[str] = ()) -> None:
     """Write a mesh: vertices (with optional per-vertex colours and normals) and faces as vertex-index lists.
 
     Faces are written as ``property list uchar int vertex_indices``.
