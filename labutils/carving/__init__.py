@@ -10,8 +10,8 @@ silhouette. Here:
    background's colours are learnt from a thin frame at the image borders (the object does not touch it), as a set
    of cells in CIELAB with the lightness scaled down (shadows change lightness more than hue); a pixel belongs to
    the object when its colour is far from every background colour; small specks are removed and small holes filled.
-2. **A voxel grid** (:class:`VoxelGrid`) over a box: given (the temple's), or found by carving a coarse grid over
-   the region every camera looks at (:func:`bounding_box_from_silhouettes`).
+2. **A voxel grid** (:class:`VoxelGrid`) over a box: given, or found from the silhouettes alone by carving coarse
+   grids around the point the silhouettes' central rays meet (:func:`bounding_box_from_silhouettes`).
 3. **Carving** (:func:`inside_silhouette` for one view, :func:`carve` for all): vectorised over voxels, one pass
    per view over the voxels still alive. Besides the occupancy it keeps, per voxel, the smallest signed distance
    to a silhouette boundary (pixels × depth / focal length: world units), positive inside: a field whose zero level
@@ -25,21 +25,21 @@ Pixels: ``(x, y)`` with x right, y down; pixel ``mask[r, c]`` is centred on ``(c
 is accepted: depth is taken as in H&Z Sec. 6.2.3).
 """
 from .silhouettes import (
-                          BackgroundModel,
-                          background_model,
-                          clean_mask,
-                          colour_distance,
-                          mask_iou,
-                          signed_distance_map,
-                          silhouette,
+    BackgroundModel,
+    background_model,
+    clean_mask,
+    colour_distance,
+    mask_iou,
+    signed_distance_map,
+    silhouette,
 )
 from .surface import (
-                          THRESHOLD_CANDIDATES,
-                          choose_threshold,
-                          mesh_volume,
-                          render_silhouette,
-                          silhouette_ious,
-                          surface_mesh,
+    THRESHOLD_CANDIDATES,
+    choose_threshold,
+    mesh_volume,
+    render_silhouette,
+    silhouette_ious,
+    surface_mesh,
 )
 from .synthetic import CarvingScene, make_snowman
 from .voxels import Carving, VoxelGrid, bounding_box_from_silhouettes, carve, inside_silhouette, project_with_depth
