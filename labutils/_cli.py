@@ -70,7 +70,7 @@ def write_all_atomically(outputs):
     """Write ``{path: str or bytes}``, each to a temporary file in its folder, then ``os.replace`` them all.
 
     On any failure (disk full, file too large, permissions) every temporary file is removed, nothing is replaced,
-    and the ``CommandError`` names the path. The files get the usual mode ``0o666 & ~umask`` (0644 under umask 022).
+    and the ``OSError`` raised names the path. The files get the usual mode ``0o666 & ~umask`` (0644 under umask 022).
     """
     mode = 0o666 & ~_umask()
     temps, target = [], None
@@ -92,7 +92,7 @@ def write_all_atomically(outputs):
                 os.remove(tmp)
             except OSError:
                 pass
-        raise CommandError(f"{target}: cannot write ({exc.strerror or exc})") from None
+        raise OSError(f"{target}: cannot write ({exc.strerror or exc})") from None
 
 
 def write_atomically(path, data):

@@ -13,6 +13,7 @@ from . import fetch
 from ._validation import as_rng
 from .datapath import DataNotFoundError, find_data
 from .geometry import KRt_from_P
+from .middlebury import read_par
 from .scene import Scene, Views, nan_tracks
 from .synthetic import make_scene
 
@@ -154,22 +155,11 @@ def load_temple():
         With the files expected and where to get them.
     """
     par = find_data("templeRing/templeR_par.txt", TEMPLE_HELP)
-    lines = par.read_text().split("\n")
-    n = int(lines[0].split()[0])
-    Ks, Rs, ts, paths = [], [], [], []
-    for k, line in enumerate(lines[1:1 + n], 2):
-        tok = line.split()
-        if len(tok) != 22:
-            raise ValueError(f"{par}, line {k}: expected a name and 21 numbers; got {len(tok)} fields")
-        v = np.array(tok[1:], float)
-        Ks.append(v[:9].reshape(3, 3) / v[8])
-        Rs.append(v[9:18].reshape(3, 3))
-        ts.append(v[18:21])
-        paths.append(par.parent / tok[0])
-    missing = [p for p in paths if not p.exists()]
-    if missing:
-        raise DataNotFoundError(f"templeRing is incomplete: missing {[str(p) for p in missing[:3]]}\n" + TEMPLE_HELP)
-    return Views(name="templeRing", K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths,
+    try:
+        views = read_par(par)
+    except FileNotFoundError as exc:
+        raise DataNotFoundError(f"templeRing is incomplete: {exc}\n" + TEMPLE_HELP) from None
+    return Views(name="templeRing", K=views.K, R=views.R, t=views.t, image_paths=views.image_paths,
                  image_size=(640, 480))
 
 
