@@ -208,3 +208,203 @@ def plot_sparsity(ax, A, n_camera_cols=None, markersize=0.3, title=None, color="
         ax.set_title(title, fontsize=10)
     ax.tick_params(labelsize=7)
     return ax
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Interactive 3D: plotly (WebGL, offline — its JavaScript ships inside the Python package), with a static
+# matplotlib fallback (static=True) for PDF export or a picture without JavaScript.
+# --------------------------------------------------------------------------------------------------------------
+def camera_frusta(R, t, K, image_size, scale):
+    """Line segments drawing each camera as a pyramid: its centre joined to the four image corners at depth ``scale``.
+
+    Parameters
+    ----------
+    R : (V, 3, 3) array_like
+    t : (V, 3) array_like
+        Poses, ``x_cam = R @ X + t``; NaN rows (unregistered views) are skipped.
+    K : (3, 3) or (V, 3, 3) array_like
+    image_size : (width, height)
+    scale : float
+        Depth of the drawn image plane, in world units.
+
+    Returns
+    -------
+    segments : (S, 2, 3) ndarray
+        Eight segments per camera: four from the centre to the corners, four around the image.
+
+    >>> camera_frusta(np.eye(3)[None], np.zeros((1, 3)), np.diag([100.0, 100.0, 1.0]), (200, 100), 1.0).shape
+    (8, 2, 3)
+    """
+    R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+    Ks = np.broadcast_to(np.asarray(K, float), (len(R), 3, 3))
+    w, h = image_size
+    corners = np.array([[0, 0, 1], [w, 0, 1], [w, h, 1], [0, h, 1]], float)
+    segments = []
+    for Ri, ti, Ki in zip(R, t, Ks):
+        if not (np.all(np.isfinite(Ri)) and np.all(np.isfinite(ti))):
+            continue
+        C = -Ri.T @ ti
+        rays = corners @ np.linalg.inv(Ki).T                     # camera frame, z = 1
+        W = (scale * rays - ti) @ Ri                              # world: Rᵀ (x_cam - t)
+        segments += [[C, W[k]] for k in range(4)] + [[W[k], W[(k + 1) % 4]] for k in range(4)]
+    return np.array(segments).reshape(-1, 2, 3)
+
+
+def _scene_size(X, C):
+    pts = np.vstack([a for a in (X, C) if a is not None and len(a)])
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    return float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 1.0
+
+
+def _colors_rgb(colors, n):
+    if colors is None:
+        return None
+    c = np.asarray(colors)
+    if c.shape != (n, 3):
+        raise ValueError(f"colors must have shape ({n}, 3) (RGB per point, 0..255 or 0..1); got {c.shape}")
+    return c / 255.0 if c.dtype.kind in "ui" or c.max() > 1 else c
+
+
+def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=None, *, mesh=None,
+                        frustum_scale=None, max_points=200_000, static=False, title=None, rng=None):
+    """An interactive 3D view of a reconstruction: points (coloured if given), cameras as frusta, a mesh.
+
+    Rotate, zoom and pan with the mouse in JupyterLab; the view is drawn by the browser (WebGL), so it stays
+    responsive with 10⁵ points and needs no running kernel. With ``static=True`` the same scene is drawn with
+    matplotlib instead (a picture for a PDF, or where JavaScript is not run).
+
+    Parameters
+    ----------
+    X : (N, 3) array_like, optional
+        Points (NaN rows are skipped).
+    colors : (N, 3) array_like, optional
+        RGB per point, 0..255 (uint8) or 0..1.
+    R, t, K, image_size : optional
+        Cameras to draw as frusta (``x_cam = R @ X + t``; K shared or per view); without K and image_size a
+        camera is drawn as a small pyramid of the same shape.
+    mesh : (vertices, faces) or (vertices, faces, vertex_colors), optional
+        A triangle mesh to draw too.
+    frustum_scale : float, optional
+        Depth of a drawn frustum (default 5 % of the scene's size).
+    max_points : int
+        Draw a random subset when there are more points (the subset is drawn with ``rng``, or the first
+        ``max_points`` without one).
+    static : bool
+        Draw with matplotlib (returns its ``Figure``) instead of plotly.
+    title : str, optional
+
+    Returns
+    -------
+    plotly.graph_objects.Figure, or matplotlib.figure.Figure with ``static=True``
+        Display it by leaving it as the last expression of a cell.
+
+    Examples
+    --------
+    >>> fig = show_reconstruction(np.random.default_rng(0).normal(size=(50, 3)), R=np.eye(3)[None],
+    ...                           t=[[0, 0, 5.0]])
+    >>> [trace.type for trace in fig.data]
+    ['scatter3d', 'scatter3d']
+    """
+    X = None if X is None else np.asarray(X, float).reshape(-1, 3)
+    keep = None if X is None else np.all(np.isfinite(X), axis=1)
+    cols = None if X is None else _colors_rgb(colors, len(X))
+    if X is not None:
+        X, cols = X[keep], (None if cols is None else cols[keep])
+        if len(X) > max_points:
+            pick = (rng.choice(len(X), max_points, replace=False) if rng is not None else np.arange(max_points))
+            X, cols = X[pick], (None if cols is None else cols[pick])
+    C = None
+    if R is not None:
+        R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+        C = -np.einsum("vji,vj->vi", R, t)
+    scale = frustum_scale or 0.05 * _scene_size(X, C)
+    segments = None
+    if R is not None:
+        Kd = np.diag([1.0, 1.0, 1.0]) if K is None else K
+        size = (1.0, 0.75) if K is None or image_size is None else image_size
+        if K is None:
+            Kd = np.array([[1.0, 0, 0.5], [0, 1.0, 0.375], [0, 0, 1]])
+        segments = camera_frusta(R, t, Kd, size, scale)
+    if static:
+        return _static_view(X, cols, segments, mesh, title)
+    import plotly.graph_objects as go
+
+    traces = []
+    if X is not None:
+        marker = dict(size=1.5, color=("rgb(40,40,40)" if cols is None else
+                                       [f"rgb({int(255 * r)},{int(255 * g)},{int(255 * b)})" for r, g, b in cols]))
+        traces.append(go.Scatter3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], mode="markers", marker=marker, name="points",
+                                   hoverinfo="skip"))
+    if segments is not None and len(segments):
+        xyz = np.concatenate([segments, np.full((len(segments), 1, 3), np.nan)], axis=1).reshape(-1, 3)
+        traces.append(go.Scatter3d(x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2], mode="lines", name="cameras",
+                                   line=dict(color="royalblue", width=2), hoverinfo="skip"))
+    if mesh is not None:
+        traces.append(_mesh_trace(*mesh))
+    fig = go.Figure(traces)
+    fig.update_layout(scene=dict(aspectmode="data", xaxis_title="x", yaxis_title="y", zaxis_title="z"),
+                      margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=title, showlegend=False,
+                      height=520)
+    return fig
+
+
+def _mesh_trace(vertices, faces, vertex_colors=None):
+    import plotly.graph_objects as go
+
+    V, F = np.asarray(vertices, float), np.asarray(faces, int)
+    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
+        raise ValueError(f"a mesh is vertices (N, 3) and faces (M, 3); got {V.shape} and {F.shape}")
+    kw = dict(color="lightgrey", flatshading=False)
+    if vertex_colors is not None:
+        c = _colors_rgb(vertex_colors, len(V))
+        kw = dict(vertexcolor=[f"rgb({int(255 * r)},{int(255 * g)},{int(255 * b)})" for r, g, b in c])
+    return go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=F[:, 0], j=F[:, 1], k=F[:, 2], name="mesh",
+                     lighting=dict(ambient=0.5, diffuse=0.8, specular=0.1), hoverinfo="skip", **kw)
+
+
+def show_mesh(vertices, faces, colors=None, *, static=False, title=None):
+    """An interactive 3D view of a triangle mesh (per-vertex colours if given); ``static=True``: matplotlib.
+
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]); F = np.array([[0, 1, 2], [0, 1, 3]])
+    >>> show_mesh(V, F).data[0].type
+    'mesh3d'
+    """
+    if static:
+        return _static_view(None, None, None, (vertices, faces, colors), title)
+    import plotly.graph_objects as go
+
+    fig = go.Figure([_mesh_trace(vertices, faces, colors)])
+    fig.update_layout(scene=dict(aspectmode="data"), margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=title,
+                      height=520)
+    return fig
+
+
+def _static_view(X, cols, segments, mesh, title):
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+    fig = plt.figure(figsize=(6, 5))
+    ax = fig.add_subplot(projection="3d")
+    if X is not None:
+        ax.scatter(X[:, 0], X[:, 1], X[:, 2], s=0.5, c=cols if cols is not None else "k", depthshade=False)
+    if segments is not None and len(segments):
+        ax.add_collection3d(Line3DCollection(segments, colors="royalblue", linewidths=0.8))
+    if mesh is not None:
+        V, F = np.asarray(mesh[0], float), np.asarray(mesh[1], int)
+        c = mesh[2] if len(mesh) > 2 and mesh[2] is not None else None
+        face_col = "lightgrey" if c is None else _colors_rgb(c, len(V))[F].mean(1)
+        ax.add_collection3d(Poly3DCollection(V[F], facecolors=face_col, edgecolors="none", alpha=1.0))
+        X = V if X is None else np.vstack([X, V])
+    pts = [a for a in (X, None if segments is None else segments.reshape(-1, 3)) if a is not None and len(a)]
+    if pts:
+        P = np.vstack(pts)
+        ax.set_xlim(P[:, 0].min(), P[:, 0].max())
+        ax.set_ylim(P[:, 1].min(), P[:, 1].max())
+        ax.set_zlim(P[:, 2].min(), P[:, 2].max())
+        set_axes_equal(ax)
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_zlabel("z")
+    if title:
+        ax.set_title(title)
+    return fig
