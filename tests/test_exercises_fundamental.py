@@ -191,3 +191,13 @@ def test_eight_point_hint_names_the_wrong_normalisation():
     report = check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, normalise=_normalisation(centre=False)),
                                verbose=False)
     assert "another normalisation" in _hints(report) and "centroid" in _hints(report)
+
+
+def test_eight_point_reduced_svd():
+    def wrong(x1, x2):
+        T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
+        y1, y2 = _h(x1) @ T1.T, _h(x2) @ T2.T
+        A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
+        U, s, Vt = np.linalg.svd(np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 3))
+        return T2.T @ U @ np.diag([s[0], s[1], 0.0]) @ Vt @ T1
+    assert "full_matrices=True" in _hints(check_eight_point(wrong, verbose=False))

@@ -173,6 +173,9 @@ def _eight_point_variants(x1, x2):
         (T2.T @ _rank2(Vt[0].reshape(3, 3)) @ T1,
          "you took the right singular vector of the *largest* singular value: f minimises ‖A f‖, the *last* row of "
          "Vᵀ (np.linalg.svd sorts the singular values in decreasing order)"),
+        (T2.T @ _rank2(Vt[min(len(x1), 9) - 1].reshape(3, 3)) @ T1,
+         "with exactly 8 points np.linalg.svd(A, full_matrices=False) returns only 8 rows of Vᵀ, and the null vector "
+         "of A is the 9th: keep full_matrices=True (the default) so that Vᵀ is 9×9"),
         (_unnormalised_8point(x1, x2),
          "you skipped the normalisation: move each image's points to centroid 0, mean distance √2 (T1, T2)"),
     ] + [
