@@ -288,7 +288,10 @@ def _diagnose_X(X, P1, P2, x1, x2, X_true=None):
     if not np.all(np.isfinite(X)):
         return "triangulate_linear returned NaN or inf"
     size = max(1.0, np.abs(triangulate(P1, P2, x1, x2)).max())
-    close = lambda Y: np.abs(X - Y).max() < 1e-6 * size
+
+    def close(Y):
+        return np.abs(X - Y).max() < 1e-6 * size
+
     if close(_dlt(P1, P2, x1, x2)) or close(_dlt(P1, P2, x1, x2, unit_rows=False)):
         return None
     variants = [
