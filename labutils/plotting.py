@@ -1,5 +1,6 @@
 """Plot helpers. Each takes an ``ax`` and returns it; none calls ``plt.show()`` or changes global style."""
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from .metrics import align_cameras
 
@@ -408,3 +409,41 @@ def _static_view(X, cols, segments, mesh, title):
     if title:
         ax.set_title(title)
     return fig
+
+
+def plot_cameras_and_points(ax, R=None, t=None, X=None, number_every=6, scale=0.08, color="C0", point_color="C3",
+                            point_size=2, z_down=None, **kwargs):
+    """Cameras and points on a 3D axis, with labelled axes and equal scales.
+
+    Cameras (``x_cam = R @ X + t``) are drawn as pyramids by :func:`plot_cameras`, every ``number_every``-th one
+    numbered just outside the ring they form (so the numbers stay legible for many cameras); points ``X (N, 3)``
+    as dots of ``point_color`` (a colour, or one value per point with ``cmap=...`` in ``kwargs``).
+
+    ``z_down``: draw the z axis pointing down. By default it does when the cameras' y axes (down in their images)
+    point along +z on average, so the picture is upright as the cameras see the scene.
+    """
+    if R is not None:
+        R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+        plot_cameras(ax, R, t, scale=scale, color=color)
+        C = -np.einsum("vji,vj->vi", R, t)
+        centre = C.mean(0)
+        for i in range(0, len(C), max(1, int(number_every))):
+            out = C[i] - centre
+            out[2] = 0.0
+            n = np.linalg.norm(out)
+            pos = C[i] + (2.5 * scale * out / n if n > 0 else 0.0)
+            ax.text(*pos, str(i), color=color, fontsize=8, ha="center", va="center")
+        if z_down is None:
+            z_down = bool(R[:, 1, 2].mean() > 0)
+    if X is not None:
+        plot_points(ax, X, color=point_color, size=point_size, **kwargs)
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_zlabel("z (pointing down)" if z_down else "z")
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(MaxNLocator(4))
+    ax.tick_params(labelsize=7)
+    set_axes_equal(ax)
+    if z_down:
+        ax.invert_zaxis()
+    return ax

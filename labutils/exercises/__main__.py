@@ -80,7 +80,7 @@ def release(args):
             raise _cli.CommandError(f"{outdir}: cannot make the folder ({exc.strerror or exc})") from None
     try:
         _cli.write_all_atomically(files)
-    except _cli.CommandError:
+    except (_cli.CommandError, OSError):
         if made:
             try:
                 outdir.rmdir()

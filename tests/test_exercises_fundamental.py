@@ -1,0 +1,203 @@
+"""Notebook 01's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
+import numpy as np
+import pytest
+
+from labutils.epipolar import fundamental_8point, hartley_normalisation, sampson_distance
+from labutils.exercises.ex01_fundamental import check_eight_point, check_normalisation_matrix, check_sampson
+
+# --- the reference solutions, as written in the notebook ---------------------------------------------------------
+
+
+def normalisation_reference(x):
+    c = x.mean(0)
+    s = np.sqrt(2) / np.linalg.norm(x - c, axis=1).mean()
+    return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1]])
+
+
+def _h(x):
+    return np.hstack([x, np.ones((len(x), 1))])
+
+
+def eight_point_reference(x1, x2, normalise=hartley_normalisation, rank2_first=True, vector=-1, denorm="T"):
+    T1, T2 = normalise(x1), normalise(x2)
+    y1, y2 = _h(x1) @ T1.T, _h(x2) @ T2.T
+    A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
+    F_hat = np.linalg.svd(A)[2][vector].reshape(3, 3)
+    if rank2_first:
+        U, s, Vt = np.linalg.svd(F_hat)
+        F_hat = U @ np.diag([s[0], s[1], 0.0]) @ Vt
+    F = {"T": T2.T @ F_hat @ T1, "none": F_hat, "swapped": T1.T @ F_hat @ T2,
+         "inverse": np.linalg.inv(T2).T @ F_hat @ np.linalg.inv(T1)}[denorm]
+    if not rank2_first:
+        U, s, Vt = np.linalg.svd(F)
+        F = U @ np.diag([s[0], s[1], 0.0]) @ Vt
+    return F / np.linalg.norm(F)
+
+
+def sampson_reference(F, x1, x2):
+    Fx1, Ftx2 = _h(x1) @ F.T, _h(x2) @ F
+    num = np.abs(np.sum(_h(x2) * Fx1, axis=1))
+    return num / np.sqrt(Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2)
+
+
+@pytest.mark.parametrize("check, solution", [
+    (check_normalisation_matrix, normalisation_reference),
+    (check_normalisation_matrix, hartley_normalisation),
+    (check_eight_point, eight_point_reference),
+    (check_eight_point, lambda x1, x2: eight_point_reference(x1, x2, normalise=normalisation_reference)),
+    (check_eight_point, lambda x1, x2: fundamental_8point(x1, x2, h_ratio=None)),
+    (check_sampson, sampson_reference),
+    (check_sampson, sampson_distance),
+])
+def test_reference_solutions_pass(check, solution):
+    report = check(solution, verbose=False)
+    assert report.passed, report.text()
+
+
+def _hints(report):
+    assert not report.passed
+    return " ".join(report.hints)
+
+
+def test_stub_is_reported_as_not_written(capsys):
+    def stub(*args):
+        raise NotImplementedError
+    for check in (check_normalisation_matrix, check_eight_point, check_sampson):
+        report = check(stub)
+        assert not report.written and "not written yet" in capsys.readouterr().out
+
+
+def test_a_student_error_is_a_hint_not_an_exception():
+    report = check_sampson(lambda F, x1, x2: 1 / 0, verbose=False)
+    assert "ZeroDivisionError" in _hints(report)
+
+
+# --- exercise 1: the normalisation --------------------------------------------------------------------------------
+
+def _normalisation(scale_to=2 ** 0.5, centre=True, scale_translation=True, spread="mean"):
+    def f(x):
+        c = x.mean(0)
+        d = np.linalg.norm(x - c, axis=1)
+        s = scale_to / (d.mean() if spread == "mean" else np.sqrt((d ** 2).mean()))
+        t = (-s * c if scale_translation else -c) if centre else np.zeros(2)
+        return np.array([[s, 0, t[0]], [0, s, t[1]], [0, 0, 1]])
+    return f
+
+
+@pytest.mark.parametrize("wrong, words", [
+    (_normalisation(scale_to=1.0), "mean distance 1"),
+    (_normalisation(centre=False), "does not move the centroid"),
+    (_normalisation(scale_translation=False), "translation must be scaled too"),
+    (_normalisation(spread="rms"), "RMS distance"),
+    (lambda x: np.linalg.inv(normalisation_reference(x)), "T⁻¹"),
+    (lambda x: normalisation_reference(x).T, "transposed"),
+    (lambda x: normalisation_reference(x)[:2], "(3, 3)"),
+])
+def test_normalisation_mistakes(wrong, words):
+    assert words in _hints(check_normalisation_matrix(wrong, verbose=False))
+
+
+def test_normalisation_from_the_pixel_origin():
+    def wrong(x):
+        c = x.mean(0)
+        s = np.sqrt(2) / np.linalg.norm(x, axis=1).mean()
+        return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1]])
+    assert "from the centroid" in _hints(check_normalisation_matrix(wrong, verbose=False))
+
+
+def test_normalisation_per_axis():
+    def wrong(x):
+        c = x.mean(0)
+        sx, sy = np.sqrt(2) / np.abs(x - c).mean(0)
+        return np.array([[sx, 0, -sx * c[0]], [0, sy, -sy * c[1]], [0, 0, 1]])
+    assert "one scale s for both axes" in _hints(check_normalisation_matrix(wrong, verbose=False))
+
+
+# --- exercise 2: the 8-point --------------------------------------------------------------------------------------
+
+def test_eight_point_without_rank_2():
+    def wrong(x1, x2):
+        T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
+        y1, y2 = _h(x1) @ T1.T, _h(x2) @ T2.T
+        A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
+        return T2.T @ np.linalg.svd(A)[2][-1].reshape(3, 3) @ T1
+    assert "rank 3" in _hints(check_eight_point(wrong, verbose=False))
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    (dict(denorm="none"), "still in normalised coordinates"),
+    (dict(denorm="swapped"), "T1 and T2 swapped"),
+    (dict(denorm="inverse"), "denormalised with T⁻¹"),
+    (dict(rank2_first=False), "rank 2 after denormalising"),
+    (dict(vector=0), "*largest* singular value"),
+    (dict(normalise=lambda x: np.eye(3)), "skipped the normalisation"),
+])
+def test_eight_point_mistakes(kwargs, words):
+    assert words in _hints(check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, **kwargs), verbose=False))
+
+
+def test_eight_point_transposed():
+    assert "transposed" in _hints(check_eight_point(lambda x1, x2: eight_point_reference(x1, x2).T, verbose=False))
+
+
+def test_eight_point_with_a_wrong_normalisation_is_caught():
+    """A student's own normalisation to mean distance 1 gives a (slightly) different F with noise."""
+    report = check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, normalise=_normalisation(scale_to=1.0)),
+                               verbose=False)
+    assert "another normalisation" in _hints(report) and "mean distance 1" in _hints(report)
+
+
+# --- exercise 3: the Sampson distance -----------------------------------------------------------------------------
+
+def _parts(F, x1, x2):
+    Fx1, Ftx2 = _h(x1) @ F.T, _h(x2) @ F
+    return np.sum(_h(x2) * Fx1, axis=1), Fx1, Ftx2
+
+
+@pytest.mark.parametrize("wrong, words", [
+    (lambda F, x1, x2: sampson_reference(F, x1, x2) ** 2, "squared distance"),
+    (lambda F, x1, x2: np.abs(_parts(F, x1, x2)[0]) / np.hypot(*_parts(F, x1, x2)[1][:, :2].T), "image 2"),
+    (lambda F, x1, x2: np.abs(_parts(F, x1, x2)[0]) / np.hypot(*_parts(F, x1, x2)[2][:, :2].T), "image 1"),
+    (lambda F, x1, x2: np.abs(_parts(F, x1, x2)[0]), "algebraic error"),
+    (lambda F, x1, x2: sampson_reference(F.T, x1, x2), "transposed"),
+    (lambda F, x1, x2: sampson_reference(F, x1, x2)[:, None], "shape"),
+])
+def test_sampson_mistakes(wrong, words):
+    assert words in _hints(check_sampson(wrong, verbose=False))
+
+
+def test_sampson_signed():
+    def wrong(F, x1, x2):
+        alg, Fx1, Ftx2 = _parts(F, x1, x2)
+        return alg / np.sqrt((Fx1[:, :2] ** 2).sum(1) + (Ftx2[:, :2] ** 2).sum(1))
+    assert "absolute value" in _hints(check_sampson(wrong, verbose=False))
+
+
+def test_sampson_third_component():
+    def wrong(F, x1, x2):
+        alg, Fx1, Ftx2 = _parts(F, x1, x2)
+        return np.abs(alg) / np.sqrt((Fx1 ** 2).sum(1) + (Ftx2 ** 2).sum(1))
+    assert "third component" in _hints(check_sampson(wrong, verbose=False))
+
+
+def test_sampson_symmetric_epipolar_distance():
+    def wrong(F, x1, x2):
+        alg, Fx1, Ftx2 = _parts(F, x1, x2)
+        return np.sqrt((alg / np.hypot(*Fx1[:, :2].T)) ** 2 + (alg / np.hypot(*Ftx2[:, :2].T)) ** 2)
+    assert "symmetric epipolar distance" in _hints(check_sampson(wrong, verbose=False))
+
+
+def test_eight_point_hint_names_the_wrong_normalisation():
+    report = check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, normalise=_normalisation(centre=False)),
+                               verbose=False)
+    assert "another normalisation" in _hints(report) and "centroid" in _hints(report)
+
+
+def test_eight_point_reduced_svd():
+    def wrong(x1, x2):
+        T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
+        y1, y2 = _h(x1) @ T1.T, _h(x2) @ T2.T
+        A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
+        U, s, Vt = np.linalg.svd(np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 3))
+        return T2.T @ U @ np.diag([s[0], s[1], 0.0]) @ Vt @ T1
+    assert "full_matrices=True" in _hints(check_eight_point(wrong, verbose=False))
