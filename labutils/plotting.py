@@ -1,5 +1,6 @@
 """Plot helpers. Each takes an ``ax`` and returns it; none calls ``plt.show()`` or changes global style."""
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from .metrics import align_cameras
 
@@ -11,6 +12,38 @@ def set_axes_equal(ax):
     ax.set_xlim3d(centre[0] - half, centre[0] + half)
     ax.set_ylim3d(centre[1] - half, centre[1] + half)
     ax.set_zlim3d(centre[2] - half, centre[2] + half)
+    return ax
+
+
+def few_ticks(ax, n=4):
+    """At most ``n`` ticks on each axis of a 2D or 3D plot, so that the labels do not overlap; returns ``ax``."""
+    axes = [ax.xaxis, ax.yaxis] + ([ax.zaxis] if hasattr(ax, "zaxis") else [])
+    for axis in axes:
+        axis.set_major_locator(MaxNLocator(n))
+    return ax
+
+
+def plot_view_errors(ax, errors, ylabel="rotation error (°)", width=0.8):
+    """Per-view errors of several reconstructions as grouped bars (one group per view).
+
+    Parameters
+    ----------
+    errors : dict str -> (V,) array_like
+        A label and its per-view errors (NaN for a view that was not registered: no bar).
+    ylabel : str
+    width : float
+        Width of one group of bars.
+
+    The legend goes above the axes, so that it never hides a bar.
+    """
+    k = len(errors)
+    w = width / max(k, 1)
+    for n, (label, e) in enumerate(errors.items()):
+        e = np.asarray(e, float)
+        ax.bar(np.arange(e.size) + (n - (k - 1) / 2) * w, np.nan_to_num(e), w, label=label)
+    ax.set_xlabel("view")
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=8, ncols=k, loc="lower left", bbox_to_anchor=(0, 1.0), frameon=False)
     return ax
 
 
