@@ -37,7 +37,6 @@ from .scene import observations
 from .triangulation import triangulate_tracks
 from .twoview import two_view_reconstruction
 
-
 # ------------------------------------------------------------------------------------- one camera, known points
 
 def pose_covariance(X, K, R, t, sigma=1.0):

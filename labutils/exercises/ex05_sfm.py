@@ -81,7 +81,8 @@ def _diagnose_next(v, seen, X, registered, min_points):
         return (f"view {v} sees the most tracks ({seen[v].sum()}), but only {counts[v]} of them are triangulated: "
                 "count only the tracks with a point already (finite X) — those give PnP its 2D–3D correspondences")
     if counts[v] == counts[free].min():
-        return f"view {v} sees the fewest triangulated points ({counts[v]}): take the largest count (argmax, not argmin)"
+        return (f"view {v} sees the fewest triangulated points ({counts[v]}): take the largest count "
+                "(argmax, not argmin)")
     return (f"view {v} sees {counts[v]} triangulated points, view {right[0]} sees {best}: count, per view, the tracks "
             "it sees whose point is triangulated ((seen & np.isfinite(X[:, 0])).sum(axis=1)) and take the largest "
             "among the unregistered views")
@@ -185,8 +186,8 @@ def _labelled_tracks():
                  "projection — K @ (R X + t), divided by its third coordinate — and that the angle is in degrees "
                  "(np.degrees) when you compare it with min_angle_deg"))
     rows.append((behind, {0: 0, 3: 0}, [0, 3], False,
-                 "a point behind the cameras was accepted (it reprojects exactly: the projection cannot tell): check the "
-                 "depth, (R X + t)[2] > 0, in every view that observes the point (cheirality)"))
+                 "a point behind the cameras was accepted (it reprojects exactly: the projection cannot tell): check "
+                 "the depth, (R X + t)[2] > 0, in every view that observes the point (cheirality)"))
     rows.append((P0, {0: 0, 1: 0, 2: 0, 3: [0.0, 14.0]}, [0, 1, 2, 3], False,
                  "a point with one observation 14 px off (and three exact ones) was accepted: *every* observation "
                  "must reproject within threshold_px — not the mean error of the track"))
@@ -282,7 +283,8 @@ def check_accept_points(accept_points, verbose=True):
         return _diagnose_accept(ok, X, R, t, x, mask)
 
     return run_checks("accept_points", accept_points, [
-        ("nine tracks, each testing one rule (cheirality, every observation, the widest angle, the mask ...)", labelled),
+        ("nine tracks, each testing one rule (cheirality, every observation, the widest angle, the mask ...)",
+         labelled),
         ("a turntable scene, σ = 1 px and 10 % outliers, 2 views not registered", scene),
     ], verbose=verbose)
 

@@ -8,7 +8,7 @@ block instead of the rotation block, radians, Σ instead of Σ⁻¹, the diagona
 import numpy as np
 
 from ..geometry import rotation_from_angle_axis
-from ..noise_study import nees, pose_covariance
+from ..noise_study import pose_covariance
 from ..pnp import pose_jacobian
 from . import run_checks
 
