@@ -179,7 +179,7 @@ def check_nees(nees_function, verbose=True):
 
     Examples
     --------
-    >>> check_nees(nees, verbose=False).passed
+    >>> check_nees(nees_reference, verbose=False).passed
     True
     """
     def by_hand(f):
