@@ -15,6 +15,38 @@ def set_axes_equal(ax):
     return ax
 
 
+def few_ticks(ax, n=4):
+    """At most ``n`` ticks on each axis of a 2D or 3D plot, so that the labels do not overlap; returns ``ax``."""
+    axes = [ax.xaxis, ax.yaxis] + ([ax.zaxis] if hasattr(ax, "zaxis") else [])
+    for axis in axes:
+        axis.set_major_locator(MaxNLocator(n))
+    return ax
+
+
+def plot_view_errors(ax, errors, ylabel="rotation error (°)", width=0.8):
+    """Per-view errors of several reconstructions as grouped bars (one group per view).
+
+    Parameters
+    ----------
+    errors : dict str -> (V,) array_like
+        A label and its per-view errors (NaN for a view that was not registered: no bar).
+    ylabel : str
+    width : float
+        Width of one group of bars.
+
+    The legend goes above the axes, so that it never hides a bar.
+    """
+    k = len(errors)
+    w = width / max(k, 1)
+    for n, (label, e) in enumerate(errors.items()):
+        e = np.asarray(e, float)
+        ax.bar(np.arange(e.size) + (n - (k - 1) / 2) * w, np.nan_to_num(e), w, label=label)
+    ax.set_xlabel("view")
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=8, ncols=k, loc="lower left", bbox_to_anchor=(0, 1.0), frameon=False)
+    return ax
+
+
 def plot_cameras(ax, R, t, scale=0.1, color="C0", label=None, numbers=False):
     """Draw cameras as small pyramids on a 3D axis (``x_cam = R @ X + t``; the apex is the centre)."""
     R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
@@ -79,14 +111,15 @@ def plot_epipolar_lines(ax, F, x, image_size, which=2, color="C2", lw=0.7):
     return ax
 
 
-def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, span=None):
+def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, span=None, pred_label=None):
     """Pose error against pixel noise, log–log (notebook 06).
 
-    Markers: the empirical RMS over cameras and trials of a :class:`labutils.uncertainty.NoiseStudy`;
+    Markers: the empirical RMS over cameras and trials of a :class:`labutils.noise_study.NoiseStudy`;
     error bars: the spread of the per-camera errors (16th to 84th percentile); dashed line: the
     predicted RMS ``σ · pred`` of a :class:`labutils.uncertainty.PosePrediction` made for σ = 1.
     ``which`` is ``'rot'`` (degrees) or ``'centre'`` (relative to the scene size). σ = 0 is left out.
     ``span = (σ_min, σ_max)`` sets the extent of the predicted line (default: the study's levels).
+    ``pred_label`` labels the predicted line (default: ``label`` + ": predicted").
     """
     s = np.array(study.sigmas, float)
     pos = s > 0
@@ -100,7 +133,9 @@ def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, 
         unit = pred.rot_rms_deg_all if which == "rot" else pred.centre_rms_rel_all
         lo_hi = (s[pos].min(), s[pos].max()) if span is None else span
         ss = np.array([lo_hi[0] / 1.5, lo_hi[1] * 1.5])
-        ax.plot(ss, unit * ss, "--", color=color, lw=1, label=None if label is None else f"{label}: predicted")
+        if pred_label is None and label is not None:
+            pred_label = f"{label}: predicted"
+        ax.plot(ss, unit * ss, "--", color=color, lw=1, label=pred_label)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xticks(s[pos])

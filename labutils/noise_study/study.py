@@ -1,5 +1,5 @@
-"""The noise study of notebook 06: reconstruct noisy copies of a scene many times and measure the aligned pose
-errors, to compare with the Cramér–Rao prediction of :mod:`labutils.uncertainty`.
+"""The noise study of the whole reconstruction (notebook 06): run a pipeline on noisy copies of a scene many times
+and measure its pose errors after the similarity alignment, to compare with :mod:`labutils.uncertainty`.
 
 :func:`run_noise_study` runs any pipeline (the incremental SfM, bundle adjustment from the truth, ...) on noisy
 observations and collects the errors in a :class:`NoiseStudy`; the helpers build the pipelines' pieces
@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import as_calibration, as_fraction, as_positive, as_rng, as_tracks
-from .bundle import bundle_adjust
-from .metrics import pose_errors
-from .pnp import pnp_ransac
-from .scene import observations
-from .triangulation import triangulate_tracks
-from .twoview import two_view_reconstruction
+from .._validation import as_calibration, as_fraction, as_positive, as_rng, as_tracks
+from ..bundle import bundle_adjust
+from ..metrics import pose_errors
+from ..pnp import pnp_ransac
+from ..scene import observations
+from ..triangulation import triangulate_tracks
+from ..twoview import two_view_reconstruction
 
 
 def noisy_observations(x_true, sigma, *, rng, outlier_ratio=0.0, image_size=None):
@@ -252,7 +252,8 @@ class Progress:
             from IPython.display import display
 
             if get_ipython() is not None:
-                self.bar = ipywidgets.IntProgress(value=0, min=0, max=self.total, description=label)
+                self.bar = ipywidgets.IntProgress(value=0, min=0, max=self.total, description=label,
+                                                  style={"description_width": "initial"})
                 display(self.bar)
         except ImportError:
             pass

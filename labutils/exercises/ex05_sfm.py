@@ -1,0 +1,292 @@
+"""Self-checks of notebook 05 (incremental structure from motion): choosing the next view, and the filter that
+decides which triangulated tracks enter the model.
+
+Each check runs a student's function on a few cases and prints pass or a hint naming the likely mistake: for the next
+view, counting every track a view sees instead of the triangulated ones, proposing a view that is already registered,
+forgetting the minimum; for the filter, each test track is built to fail one rule (behind a camera, one observation
+far off while the mean is small, a narrow angle ...), so the track a wrong answer misjudges names the rule.
+"""
+import numpy as np
+
+from ..geometry import camera_center
+from ..reconstruction import masked_reprojection_errors
+from ..synthetic import look_at, make_scene
+from ..triangulation import ray_angles_deg, triangulate_multiview
+from . import run_checks
+
+# ---------------------------------------------------------------------------------------------------------------
+# exercise 1: the next view
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def next_view_reference(seen, X, registered, min_points=15):
+    """The reference answer: the unregistered view seeing the most triangulated points, or None."""
+    counts = (np.asarray(seen, bool) & np.isfinite(np.asarray(X, float)[:, 0])).sum(1)
+    counts[np.asarray(registered, bool)] = -1
+    v = int(np.argmax(counts))
+    return v if counts[v] >= min_points else None
+
+
+def _small_model():
+    """5 views, 10 tracks, views 0 and 1 registered, tracks 0-5 triangulated (6-9 not yet)."""
+    seen = np.zeros((5, 10), bool)
+    seen[0] = True
+    seen[1, :8] = True
+    seen[2, [0, 1, 2, 6, 7, 8, 9]] = True      # 7 tracks, 3 of them triangulated
+    seen[3, :5] = True                         # 5 tracks, all triangulated: the answer
+    seen[4, 5:] = True                         # 5 tracks, 1 triangulated
+    X = np.full((10, 3), np.nan)
+    X[:6] = np.arange(18.0).reshape(6, 3)
+    registered = np.array([True, True, False, False, False])
+    return seen, X, registered
+
+
+def _as_view(v, V, name="choose_next_view"):
+    if v is None:
+        return None
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+        raise ValueError(f"{name} must return a view index (an int) or None; it returned {v!r} "
+                         f"({type(v).__name__})")
+    return int(v)
+
+
+def _diagnose_next(v, seen, X, registered, min_points):
+    """None when ``v`` is a right answer (any of the tied best views, or None), else the likely mistake."""
+    V = len(registered)
+    v = _as_view(v, V)
+    tri = np.isfinite(X[:, 0])
+    counts = (seen & tri).sum(1)
+    free = ~registered
+    best = counts[free].max() if free.any() else -1
+    right = [] if best < min_points else [int(w) for w in np.flatnonzero(free & (counts == best))]
+    if (v is None and not right) or v in right:
+        return None
+    if v is None:
+        if best == min_points:
+            return (f"view {right[0]} sees exactly min_points = {min_points} triangulated points, which is enough: "
+                    "return it (counts >= min_points)")
+        return f"view {right[0]} sees {best} triangulated points (at least min_points = {min_points}): return it"
+    if not 0 <= v < V:
+        return (f"you returned {v}, which is not a view index (0..{V - 1}): return the view (np.argmax of the counts), "
+                "not its count")
+    if registered[v]:
+        if not free.any():
+            return "every view is registered: return None (nothing is left to add)"
+        return f"view {v} is already registered: leave the registered views out before taking the largest count"
+    if not right:
+        return (f"no unregistered view sees min_points = {min_points} triangulated points (the best sees {best}): "
+                "return None, and the pipeline stops adding views")
+    all_counts = np.where(free, seen.sum(1), -1)
+    if all_counts[v] == all_counts.max() and counts[v] < best:
+        return (f"view {v} sees the most tracks ({seen[v].sum()}), but only {counts[v]} of them are triangulated: "
+                "count only the tracks with a point already (finite X) — those give PnP its 2D–3D correspondences")
+    if counts[v] == counts[free].min():
+        return (f"view {v} sees the fewest triangulated points ({counts[v]}): take the largest count "
+                "(argmax, not argmin)")
+    return (f"view {v} sees {counts[v]} triangulated points, view {right[0]} sees {best}: count, per view, the tracks "
+            "it sees whose point is triangulated ((seen & np.isfinite(X[:, 0])).sum(axis=1)) and take the largest "
+            "among the unregistered views")
+
+
+def check_choose_next_view(choose_next_view, verbose=True):
+    """Self-check of ``choose_next_view(seen, X, registered, min_points) -> int or None``.
+
+    Cases: a small model built so that each typical mistake picks another view, the minimum (exactly
+    ``min_points`` is enough, fewer is not), every view registered, and a turntable model half way through.
+
+    Examples
+    --------
+    >>> check_choose_next_view(next_view_reference, verbose=False).passed
+    True
+    """
+    def small(f):
+        seen, X, reg = _small_model()
+        return _diagnose_next(f(seen.copy(), X.copy(), reg.copy(), 3), seen, X, reg, 3)
+
+    def minimum(f):
+        seen, X, reg = _small_model()
+        for m in (5, 6):                                   # the best unregistered view sees exactly 5
+            hint = _diagnose_next(f(seen.copy(), X.copy(), reg.copy(), m), seen, X, reg, m)
+            if hint:
+                return hint
+        return None
+
+    def all_registered(f):
+        seen, X, reg = _small_model()
+        reg[:] = True
+        return _diagnose_next(f(seen.copy(), X.copy(), reg.copy(), 3), seen, X, reg, 3)
+
+    def turntable(f):
+        s = make_scene(150, 16, layout="turntable", noise_px=0.0, rng=np.random.default_rng(5))
+        seen = s.visible
+        reg = np.zeros(16, bool)
+        reg[3:9] = True
+        X = np.where((seen[reg].sum(0) >= 2)[:, None], s.X, np.nan)
+        return _diagnose_next(f(seen.copy(), X.copy(), reg.copy(), 15), seen, X, reg, 15)
+
+    return run_checks("choose_next_view", choose_next_view, [
+        ("a small model: the unregistered view that sees the most triangulated points", small),
+        ("the minimum: exactly min_points is enough, fewer is not (None)", minimum),
+        ("every view registered: None", all_registered),
+        ("a turntable model half way through (ties: any of the best views)", turntable),
+    ], verbose=verbose)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# exercise 2: which triangulated tracks enter the model
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def accept_points_reference(X, K, R, t, tracks, mask, threshold_px, min_angle_deg):
+    """The reference answer, from the library's pieces (``masked_reprojection_errors``, ``ray_angles_deg``)."""
+    X, R, t = np.asarray(X, float), np.asarray(R, float), np.asarray(t, float)
+    mask = np.asarray(mask, bool)
+    V = len(R)
+    Ks = np.repeat(np.asarray(K, float)[None], V, axis=0)
+    finite = np.isfinite(X).all(1)
+    Xf = np.where(finite[:, None], X, 0.0)
+    m = mask & finite[None]
+    err = masked_reprojection_errors(Ks, R, t, Xf, tracks, m)        # inf behind a camera, NaN outside m
+    within = np.all(~m | (err <= threshold_px), axis=0)
+    C = np.full((V, 3), np.nan)
+    used = m.any(1)
+    C[used] = camera_center(R[used], t[used])
+    angle = ray_angles_deg(np.nan_to_num(C), Xf, m)
+    return finite & (m.sum(0) >= 2) & within & (angle >= min_angle_deg)
+
+
+# The test rig of the labelled tracks: five cameras on a circle of radius 1 around the origin, looking at it, at
+# azimuths 0, 1, 2, 10 and 30 degrees (so two rays meet at about the azimuth difference); view 4 is not registered.
+_AZIMUTHS = np.radians([0.0, 1.0, 2.0, 10.0, 30.0])
+_K = np.array([[1500.0, 0.0, 360.0], [0.0, 1500.0, 288.0], [0.0, 0.0, 1.0]])
+THRESHOLD, MIN_ANGLE = 4.0, 1.5
+
+
+def _rig():
+    poses = [look_at(np.array([np.cos(a), np.sin(a), 0.02]), np.zeros(3)) for a in _AZIMUTHS]
+    R, t = np.stack([p[0] for p in poses]), np.stack([p[1] for p in poses])
+    R[4], t[4] = np.nan, np.nan                                     # not registered
+    return R, t
+
+
+def _project(R, t, X):
+    q = (R @ X + t) @ _K.T
+    return q[:2] / q[2]
+
+
+def _labelled_tracks():
+    """(X, tracks, mask, expected, hints): each track built to test one rule, with the hint for misjudging it."""
+    R, t = _rig()
+    R4, t4 = look_at(np.array([np.cos(_AZIMUTHS[4]), np.sin(_AZIMUTHS[4]), 0.02]), np.zeros(3))
+    rows = []       # (X, {view: pixel offset}, views in mask, expected, hint when misjudged)
+    P0 = np.array([0.01, -0.02, 0.03])
+    behind = 3.0 * np.array([np.cos(np.radians(5)), np.sin(np.radians(5)), 0.02])     # beyond the cameras
+    rows.append((P0, {0: 0, 3: 0}, [0, 3], True,
+                 "a clean point (exact observations in views 0 and 3, seen under about 10°) was rejected: check the "
+                 "projection — K @ (R X + t), divided by its third coordinate — and that the angle is in degrees "
+                 "(np.degrees) when you compare it with min_angle_deg"))
+    rows.append((behind, {0: 0, 3: 0}, [0, 3], False,
+                 "a point behind the cameras was accepted (it reprojects exactly: the projection cannot tell): check "
+                 "the depth, (R X + t)[2] > 0, in every view that observes the point (cheirality)"))
+    rows.append((P0, {0: 0, 1: 0, 2: 0, 3: [0.0, 14.0]}, [0, 1, 2, 3], False,
+                 "a point with one observation 14 px off (and three exact ones) was accepted: *every* observation "
+                 "must reproject within threshold_px — not the mean error of the track"))
+    rows.append((P0, {0: [3.0, 0.0], 3: [0.0, -3.0]}, [0, 3], True,
+                 "a point whose observations are 3 px off (threshold 4 px) was rejected: compare the distance "
+                 "‖x − π(X)‖ itself with threshold_px, not its square"))
+    rows.append((P0, {0: 0, 1: 0}, [0, 1], False,
+                 "a point seen under only about 1° (views 0 and 1; min_angle_deg = 1.5) was accepted: reject a point "
+                 "whose widest angle between two viewing rays is below min_angle_deg (its depth is poorly determined)"))
+    rows.append((P0, {0: 0, 1: 0, 2: 0}, [0, 1, 2], True,
+                 "a point seen by views 0, 1 and 2 (rays 1°, 1° and 2° apart) was rejected: the triangulation angle "
+                 "is the *widest* angle between any two of its rays (here views 0 and 2), not the first pair's or the "
+                 "smallest"))
+    rows.append((P0, {3: 0}, [3], False,
+                 "a point with a single observation was accepted: a point needs at least two observations (and its "
+                 "angle is undefined)"))
+    rows.append((P0, {0: 0, 2: [40.0, 25.0], 3: 0}, [0, 3], True,
+                 "a point was rejected because of an observation that is not in mask (view 2, 47 px off): use only "
+                 "the observations in mask[:, k]; the others are not part of the point"))
+    rows.append((P0, {0: 0, 3: 0, 4: [5.0, 5.0]}, [0, 3], True,
+                 "a point was rejected because of view 4, which is not registered (its R and t are NaN) and not in "
+                 "mask: use only the observations in mask[:, k]"))
+    N = len(rows)
+    X = np.stack([r[0] for r in rows])
+    tracks = np.full((5, N, 2), np.nan)
+    mask = np.zeros((5, N), bool)
+    for k, (Xk, obs, views, _, _) in enumerate(rows):
+        for v, off in obs.items():
+            Rv, tv = (R4, t4) if v == 4 else (R[v], t[v])
+            tracks[v, k] = _project(Rv, tv, Xk) + np.broadcast_to(np.asarray(off, float), 2)
+        mask[views, k] = True
+    expected = np.array([r[3] for r in rows])
+    hints = [r[4] for r in rows]
+    return X, R, t, tracks, mask, expected, hints
+
+
+def _as_ok(ok, N):
+    ok = np.asarray(ok)
+    if ok.shape != (N,):
+        raise ValueError(f"accept_points must return a boolean array of shape ({N},), one entry per track; it returned "
+                         f"shape {ok.shape}")
+    if ok.dtype != bool:
+        if not np.all(np.isin(ok, [0, 1])):
+            raise ValueError("accept_points must return booleans (True: keep the point)")
+        ok = ok.astype(bool)
+    return ok
+
+
+def _diagnose_accept(ok, X, R, t, tracks, mask):
+    ref = accept_points_reference(X, _K, R, t, tracks, mask, THRESHOLD, MIN_ANGLE)
+    ok = _as_ok(ok, len(X))
+    if np.array_equal(ok, ref):
+        return None
+    wrong = np.flatnonzero(ok != ref)
+    return (f"{wrong.size} of {len(X)} tracks judged differently from the reference ({int(ok[wrong].sum())} accepted "
+            f"that should be rejected, {int((~ok[wrong]).sum())} the other way): a point is kept when it has ≥ 2 "
+            "observations in mask, is in front of every camera that observes it, reprojects within threshold_px in "
+            "each, and its widest ray angle is ≥ min_angle_deg")
+
+
+def check_accept_points(accept_points, verbose=True):
+    """Self-check of ``accept_points(X, K, R, t, tracks, mask, threshold_px, min_angle_deg) -> (N,) bool``.
+
+    Cases: nine tracks, each built to test one rule (a clean point, one behind the cameras, one observation far off,
+    errors below the threshold, a narrow angle, a wide angle between the outer rays only, a single observation, an
+    observation outside the mask, an unregistered view); a noisy turntable scene with outliers against the reference.
+
+    Examples
+    --------
+    >>> check_accept_points(accept_points_reference, verbose=False).passed
+    True
+    """
+    def labelled(f):
+        X, R, t, tracks, mask, expected, hints = _labelled_tracks()
+        ok = _as_ok(f(X.copy(), _K.copy(), R.copy(), t.copy(), tracks.copy(), mask.copy(), THRESHOLD, MIN_ANGLE),
+                    len(X))
+        wrong = np.flatnonzero(ok != expected)
+        return None if wrong.size == 0 else hints[wrong[0]]
+
+    def scene(f):
+        rng = np.random.default_rng(7)
+        s = make_scene(120, 8, layout="turntable", noise_px=1.0, outlier_ratio=0.1, rng=rng, K=_K)
+        R, t = s.R.copy(), s.t.copy()
+        R[6:], t[6:] = np.nan, np.nan                               # views 6, 7 not registered yet
+        x = s.x_meas
+        mask = np.all(np.isfinite(x), axis=-1)
+        mask[6:] = False
+        Ps = np.einsum("ij,vjk->vik", _K, np.concatenate([s.R, s.t[:, :, None]], axis=2))
+        X = triangulate_multiview(Ps[:6], np.where(mask[:6, :, None], x[:6], np.nan))
+        keep = np.isfinite(X[:, 0])
+        X, x, mask = X[keep], x[:, keep], mask[:, keep]
+        ok = f(X.copy(), _K.copy(), R.copy(), t.copy(), x.copy(), mask.copy(), THRESHOLD, MIN_ANGLE)
+        return _diagnose_accept(ok, X, R, t, x, mask)
+
+    return run_checks("accept_points", accept_points, [
+        ("nine tracks, each testing one rule (cheirality, every observation, the widest angle, the mask ...)",
+         labelled),
+        ("a turntable scene, σ = 1 px and 10 % outliers, 2 views not registered", scene),
+    ], verbose=verbose)
+
+
+__all__ = ["accept_points_reference", "check_accept_points", "check_choose_next_view", "next_view_reference"]
