@@ -36,8 +36,14 @@ from pathlib import Path
 import numpy as np
 
 from ._validation import as_matrix, as_points
-from .epipolar import (essential_from_fundamental, fundamental_8point, fundamental_from_pose, fundamental_ransac,
-                       pose_from_essential, sampson_distance)
+from .epipolar import (
+    essential_from_fundamental,
+    fundamental_8point,
+    fundamental_from_pose,
+    fundamental_ransac,
+    pose_from_essential,
+    sampson_distance,
+)
 from .geometry import rotation_from_angle_axis, skew
 
 __all__ = ["Features", "read_gray", "resize_gray", "scale_calibration", "to_original_pixels", "to_working_pixels",

@@ -18,8 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .features import (IMAGE_SUFFIXES, detect_features, match_views, read_gray, scale_calibration, select_pairs,
-                       to_original_pixels, track_statistics, tracks_from_matches)
+from .features import (
+    IMAGE_SUFFIXES,
+    detect_features,
+    match_views,
+    read_gray,
+    scale_calibration,
+    select_pairs,
+    to_original_pixels,
+    track_statistics,
+    tracks_from_matches,
+)
 from .sfm import read_calibration, write_tracks
 
 
@@ -156,11 +165,11 @@ def main(argv=None):
         description="Tracks from a folder of calibrated images (SIFT, ratio test, mutual check, epipolar filter "
                     "with known K, union-find), written as a VGG track file for python -m labutils.sfm.")
     parser.add_argument("image_dir", help="folder of images (PNG, JPEG), used in sorted file-name order")
-    parser.add_argument("K", help="calibration: one 3x3 matrix shared by all images, or one per image stacked (3V rows)")
+    parser.add_argument("K", help="calibration: one 3x3 matrix shared by all images, or one per image (3V rows)")
     parser.add_argument("--out", required=True, help="the track file to write: one row per track, 'x y' per image, "
                                                      "-1 -1 where unseen, in the pixels of the original images")
     parser.add_argument("--max-size", type=int, default=None,
-                        help="reduce each image so that its longer side is at most this many pixels (default: full size)")
+                        help="reduce each image so that its longer side is at most this many pixels (default: none)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
     parser.add_argument("--pairs", choices=("auto", "all", "sequence", "ring"), default="auto",
                         help="which pairs to match (default auto: all for up to 20 images, else sequence)")
@@ -169,7 +178,8 @@ def main(argv=None):
     parser.add_argument("--ratio", type=float, default=0.8, help="ratio-test threshold (default 0.8)")
     parser.add_argument("--threshold", type=float, default=1.0,
                         help="epipolar (Sampson) threshold in pixels of the reduced images (default 1)")
-    parser.add_argument("--min-inliers", type=int, default=20, help="fewest verified matches to keep a pair (default 20)")
+    parser.add_argument("--min-inliers", type=int, default=20,
+                        help="fewest verified matches to keep a pair (default 20)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = parser.parse_args(argv)
 
