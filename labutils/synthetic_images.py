@@ -44,7 +44,7 @@ def look_at(C, target, up=(0.0, 0.0, 1.0)):
     return R, -R @ C
 
 
-def blob_texture(size, rng, n_blobs=400):
+def blob_texture(size, rng, n_blobs=400, radius=(0.006, 0.05)):
     """A grey texture of random discs and rectangles at several scales, lightly blurred: many SIFT blobs.
 
     Parameters
@@ -53,6 +53,8 @@ def blob_texture(size, rng, n_blobs=400):
         Side in pixels.
     rng : numpy.random.Generator
     n_blobs : int
+    radius : (float, float)
+        Smallest and largest blob radius, as a fraction of ``size`` (drawn log-uniformly).
 
     Returns
     -------
@@ -70,7 +72,7 @@ def blob_texture(size, rng, n_blobs=400):
     img = np.full((size, size), 128, np.uint8)
     for _ in range(int(n_blobs)):
         c = rng.integers(0, size, 2)
-        r = int(size * np.exp(rng.uniform(np.log(0.006), np.log(0.05))))
+        r = int(round(size * np.exp(rng.uniform(np.log(radius[0]), np.log(radius[1])))))
         grey = int(rng.integers(0, 256))
         if rng.random() < 0.6:
             cv2.circle(img, (int(c[0]), int(c[1])), max(r, 1), grey, -1, lineType=cv2.LINE_AA)
@@ -152,7 +154,7 @@ class RenderedScene:
 
 
 def render_corner(n_views=6, image_size=(320, 240), *, rng, arc_deg=50.0, distance=2.6, height=1.6,
-                  texture_px=768, noise_grey=1.0):
+                  texture_px=768, n_blobs=400, radius=(0.006, 0.05), noise_grey=1.0):
     """Render the inside corner of a box (three textured unit squares) from ``n_views`` cameras on an arc.
 
     The cameras stand at ``distance`` from the corner's vertical axis and ``height`` above the floor,
@@ -170,6 +172,8 @@ def render_corner(n_views=6, image_size=(320, 240), *, rng, arc_deg=50.0, distan
     distance, height : float
     texture_px : int
         Texture resolution per face.
+    n_blobs, radius :
+        Of each face's :func:`blob_texture`.
     noise_grey : float
         Standard deviation of the Gaussian noise added to each image (grey levels).
 
@@ -202,7 +206,7 @@ def render_corner(n_views=6, image_size=(320, 240), *, rng, arc_deg=50.0, distan
         R, t = look_at([distance * np.cos(a), distance * np.sin(a), height], target)
         Rs.append(R)
         ts.append(t)
-    textures = [blob_texture(texture_px, rng) for _ in CORNER_FACES]
+    textures = [blob_texture(texture_px, rng, n_blobs=n_blobs, radius=radius) for _ in CORNER_FACES]
     S = texture_px
     M = np.array([[1.0 / S, 0.0, 0.5 / S], [0.0, 1.0 / S, 0.5 / S], [0.0, 0.0, 1.0]])   # texture px -> (u, v)
     images, labels = [], []
