@@ -112,6 +112,11 @@ def run(args, log):
     except ValueError as exc:
         raise _Fail(str(exc).replace("views of the tracks file", f"images in {folder}")) from None
     _check_output(args.out)
+    import cv2
+
+    for p in paths:                      # a format check from each file's first bytes, before any work
+        if not cv2.haveImageReader(str(p)):
+            raise _Fail(f"{p}: cannot read the image (not a PNG/JPEG file, or damaged)")
     V = len(paths)
     log(f"{V} images in {folder}" + (f", reduced to at most {args.max_size} px" if args.max_size else ""))
 
