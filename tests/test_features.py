@@ -237,25 +237,31 @@ def test_matches_on_rendered_images_are_correct(corner):
 
 
 def test_epipolar_filter_recovers_inliers_and_rejects_points_behind(rng):
-    s = make_scene(120, 2, noise_px=0.3, outlier_ratio=0.2, rng=rng)
+    s = make_scene(120, 2, noise_px=0.3, outlier_ratio=0.2, layout="forward", rng=rng)
     x1, x2, idx = s.pair(0, 1)
     correct = ~(s.outliers[0, idx] | s.outliers[1, idx])
     g = ft.epipolar_filter(x1, x2, rng=np.random.default_rng(0), threshold_px=1.5)
     # a wrong match passes only when it happens to fall near its epipolar line: within ±1.5 px of a line
-    # crossing a 640-px image, about 2 % of them (0.02 × 24 ≈ 0.5 expected)
-    assert (g.inliers & correct).sum() == correct.sum() and (g.inliers & ~correct).sum() <= 2
-    # points behind both cameras satisfy every epipolar constraint: only E (with K) can tell
-    X_behind = np.array([0.0, 0.0, -4.0]) + rng.normal(0, 0.5, (15, 3))
-    x1b, x2b = [(X_behind @ s.R[v].T + s.t[v]) @ s.K.T for v in (0, 1)]
-    x1b, x2b = x1b[:, :2] / x1b[:, 2:], x2b[:, :2] / x2b[:, 2:]
-    X1, X2 = np.vstack([x1[correct], x1b]), np.vstack([x2[correct], x2b])
+    # crossing a 720-px image, about 2 % of them (0.02 × 40 ≈ 1 expected)
+    assert (g.inliers & correct).sum() == correct.sum() and (g.inliers & ~correct).sum() <= 3
+    # Wrong matches on the right epipolar line but across the epipole (forward motion puts it near the image):
+    # x2ᵀ F x1 = 0 holds, but the two rays meet behind the cameras. No F can tell; E (with K) can. We build them
+    # on the epipolar lines of the F estimated from the correct matches, 3 of ~80 (a few per cent, as in real data).
+    F = ft.epipolar_filter(x1[correct], x2[correct], rng=np.random.default_rng(0), threshold_px=1.5).F
+    e2 = np.linalg.svd(F.T)[2][-1]
+    e2 = e2[:2] / e2[2]
+    k = np.flatnonzero(correct)[np.argsort(np.linalg.norm(x2[correct] - e2, axis=1))][:3]
+    xb = e2 - 0.5 * (x2[k] - e2)                      # across the epipole ...
+    line = np.hstack([x1[k], np.ones((3, 1))]) @ F.T  # ... then onto the epipolar line of x1
+    xb -= (np.sum(line[:, :2] * xb, 1) + line[:, 2])[:, None] * line[:, :2] / np.sum(line[:, :2] ** 2, 1)[:, None]
+    X1, X2 = np.vstack([x1[correct], x1[k]]), np.vstack([x2[correct], xb])
     g_F = ft.epipolar_filter(X1, X2, rng=np.random.default_rng(0), threshold_px=1.5)
     g_E = ft.epipolar_filter(X1, X2, rng=np.random.default_rng(0), threshold_px=1.5, K1=s.K, K2=s.K)
     behind = np.arange(len(X1)) >= correct.sum()
     assert g_F.inliers[behind].all()
     assert not g_E.inliers[behind].any() and g_E.inliers[~behind].all() and g_E.n_behind == behind.sum()
-    R_true, t_true = relative_pose(s.R[0], s.t[0], s.R[1], s.t[1])
-    assert rotation_error_deg(g_E.R, R_true) < 0.2
+    R_true, _ = relative_pose(s.R[0], s.t[0], s.R[1], s.t[1])
+    assert g_E.pose_reliable and rotation_error_deg(g_E.R, R_true) < 0.5
 
 
 def test_guided_sampling_finds_the_same_inliers(rng):
@@ -347,18 +353,24 @@ def test_sift_precise_upscale_removes_the_quarter_pixel():
 # --- real data ------------------------------------------------------------------------------------------------
 
 
-def test_dino_pair_matches_agree_with_the_cameras(dino):
-    """Views 24 and 25 of the dinosaur: the verified matches lie on the epipolar lines of the given cameras."""
+@pytest.mark.parametrize("i, j", [(24, 25), (32, 34)])
+def test_dino_pair_matches_agree_with_the_cameras(dino, i, j):
+    """Dinosaur pairs: the verified matches lie on the epipolar lines of the given cameras, and none that does is lost.
+
+    (32, 34) is 20° apart and nearly affine: E from the RANSAC F is ~12° off there, and refined from it alone the
+    pose lands where every point is behind the cameras; the filter must not reject the matches for that.
+    """
     if not dino.image_paths:
         pytest.skip("the dinosaur's images are missing")
-    f = [ft.detect_features(dino.image(k)) for k in (24, 25)]
+    f = [ft.detect_features(dino.image(k)) for k in (i, j)]
     m, info = ft.match_descriptors(f[0].descriptors, f[1].descriptors, return_info=True)
-    g = ft.epipolar_filter(f[0].xy[m[:, 0]], f[1].xy[m[:, 1]], rng=np.random.default_rng(0), K1=dino.K, K2=dino.K,
-                           ranking=info["distance_ratio"])
-    F_true = fundamental_from_pose(dino.K, dino.K, *relative_pose(dino.R[24], dino.t[24], dino.R[25], dino.t[25]))
-    d = ft.sampson_distance(F_true, f[0].xy[m[g.inliers, 0]], f[1].xy[m[g.inliers, 1]])
+    x1, x2 = f[0].xy[m[:, 0]], f[1].xy[m[:, 1]]
+    g = ft.epipolar_filter(x1, x2, rng=np.random.default_rng(0), K1=dino.K, K2=dino.K, ranking=info["distance_ratio"])
+    F_true = fundamental_from_pose(dino.K, dino.K, *relative_pose(dino.R[i], dino.t[i], dino.R[j], dino.t[j]))
+    d = ft.sampson_distance(F_true, x1, x2)
     # the provided tracks reproject with a median of 0.2 px (data README): ours must be as consistent
-    assert g.inliers.sum() > 300 and np.median(d) < 0.3 and np.mean(d > 2.0) < 0.01
+    assert g.inliers.sum() > 100 and np.median(d[g.inliers]) < 0.3 and np.mean(d[g.inliers] > 2.0) < 0.01
+    assert g.inliers.sum() >= 0.95 * (d < 1.0).sum()
 
 
 # --- the command line -----------------------------------------------------------------------------------------
