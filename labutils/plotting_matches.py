@@ -69,6 +69,8 @@ def plot_track_lengths(ax, length_counts, width=0.8):
         c[:len(length_counts[name])] = length_counts[name]
         x = np.arange(2, L)
         ax.bar(x + (k - (len(names) - 1) / 2) * w, c[2:], w, label=name)
+    longest = max(int(np.flatnonzero(np.asarray(c))[-1]) if np.any(c) else 2 for c in length_counts.values())
+    ax.set_xlim(1.4, longest + 0.6)
     ax.set_yscale("log")
     ax.set_xlabel("views per track")
     ax.set_ylabel("tracks")
