@@ -30,10 +30,12 @@ Pixel convention: OpenCV puts pixel centres at integer coordinates, so reducing 
 a pixel ``x`` of the original to ``s (x + 0.5) - 0.5``, not to ``s x`` (half a pixel apart).
 """
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._validation import as_matrix, as_points
 from .epipolar import (
@@ -60,7 +62,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 # Images and pixel scales
 # ---------------------------------------------------------------------------------------------
 
-def scale_calibration(K, scale):
+def scale_calibration(K: ArrayLike, scale: float) -> np.ndarray:
     """The calibration of an image reduced (or enlarged) by ``scale``, with OpenCV's pixel centres.
 
     A pixel ``x`` of the original lands at ``s (x + 0.5) - 0.5`` in the scaled image, so
@@ -101,7 +103,7 @@ def _as_pixels(x, name):
     return x
 
 
-def to_original_pixels(x, scale):
+def to_original_pixels(x: ArrayLike, scale: float) -> np.ndarray:
     """Pixels of an image scaled by ``scale`` back to the original: ``(x + 0.5) / s - 0.5``.
 
     ``x`` has shape ``(..., 2)``; NaN (unseen) stays NaN.
@@ -113,7 +115,7 @@ def to_original_pixels(x, scale):
     return (_as_pixels(x, "x") + 0.5) / scale - 0.5
 
 
-def to_working_pixels(x, scale):
+def to_working_pixels(x: ArrayLike, scale: float) -> np.ndarray:
     """Pixels of the original image in an image scaled by ``scale``: ``s (x + 0.5) - 0.5``.
 
     >>> to_working_pixels(to_original_pixels([[3.0, 7.0]], 0.25), 0.25)
@@ -122,7 +124,7 @@ def to_working_pixels(x, scale):
     return scale * (_as_pixels(x, "x") + 0.5) - 0.5
 
 
-def resize_gray(image, max_size=None):
+def resize_gray(image: ArrayLike, max_size: int | None = None) -> tuple[np.ndarray, float]:
     """A grey copy of ``image`` whose longer side is at most ``max_size``, and the scale used.
 
     Parameters
@@ -160,7 +162,7 @@ def resize_gray(image, max_size=None):
     return cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA), s
 
 
-def read_gray(path, max_size=None):
+def read_gray(path: str | Path, max_size: int | None = None) -> tuple[np.ndarray, float, tuple[int, int]]:
     """Read an image file as grey, reduced so that its longer side is at most ``max_size``.
 
     JPEG files are decoded directly at 1/2, 1/4 or 1/8 of their size when that is still at least the
@@ -262,7 +264,8 @@ class Features:
         return to_original_pixels(self.xy, self.scale)
 
 
-def detect_features(image, *, scale=1.0, n_features=0, contrast_threshold=0.04, precise_upscale=True):
+def detect_features(image: ArrayLike, *, scale: float = 1.0, n_features: int = 0, contrast_threshold: float = 0.04,
+                    precise_upscale: bool = True) -> Features:
     """SIFT keypoints and descriptors of one image (OpenCV; Lowe, IJCV 2004).
 
     SIFT starts from the image enlarged twice. OpenCV's default enlargement is off by half a pixel of the
@@ -319,7 +322,7 @@ def _as_descriptors(d, name):
     return d
 
 
-def nearest_neighbours(d1, d2, k=2, chunk=2048):
+def nearest_neighbours(d1: ArrayLike, d2: ArrayLike, k: int = 2, chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` (1 or 2) nearest descriptors of ``d2`` to each row of ``d1``, by Euclidean distance.
 
     Brute force: ``|a - b|² = |a|² + |b|² - 2 a·b`` for a chunk of rows at a time (one matrix product).
@@ -373,7 +376,7 @@ def nearest_neighbours(d1, d2, k=2, chunk=2048):
     return idx, dist
 
 
-def ratio_test(dist, ratio=0.8):
+def ratio_test(dist: ArrayLike, ratio: float = 0.8) -> np.ndarray:
     """Lowe's ratio test (Lowe 2004, Sec. 7.1): keep a match whose nearest neighbour is clearly the best.
 
     A correct match is much closer than the closest *wrong* neighbour; for an ambiguous or unmatched
@@ -417,7 +420,7 @@ def _as_index_list(m, name):
     return m.astype(np.int64)
 
 
-def mutual_check(m12, m21):
+def mutual_check(m12: ArrayLike, m21: ArrayLike) -> np.ndarray:
     """Mutual (cross) check of two one-way match lists: keep ``i -> j`` only if also ``j -> i``.
 
     Parameters
@@ -455,7 +458,8 @@ def mutual_check(m12, m21):
     return np.column_stack([i[ok], j[ok]]).astype(np.int64).reshape(-1, 2)
 
 
-def match_descriptors(d1, d2, *, ratio=0.8, cross_check=True, return_info=False):
+def match_descriptors(d1: ArrayLike, d2: ArrayLike, *, ratio: float | None = 0.8, cross_check: bool = True,
+                      return_info: bool = False) -> np.ndarray | tuple[np.ndarray, dict]:
     """Match two descriptor sets: nearest neighbour, ratio test, then the mutual check.
 
     Parameters
@@ -612,8 +616,9 @@ def _robust_fundamental(x1, x2, rng, threshold_px, confidence, max_iter, ranking
     return F, inl
 
 
-def epipolar_filter(x1, x2, *, rng, threshold_px=1.0, K1=None, K2=None, ranking=None, confidence=0.999, max_iter=400,
-                    refine_rounds=3):
+def epipolar_filter(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator, threshold_px: float = 1.0,
+                    K1: ArrayLike | None = None, K2: ArrayLike | None = None, ranking: ArrayLike | None = None,
+                    confidence: float = 0.999, max_iter: int = 400, refine_rounds: int = 3) -> PairGeometry:
     """Remove the matches that contradict the epipolar geometry of the pair.
 
     1. F by adaptive RANSAC on 7-point samples with the Sampson distance
@@ -735,18 +740,18 @@ class UnionFind:
     [0, 1, 2, 0, 0]
     """
 
-    def __init__(self, n):
+    def __init__(self, n: int):
         self.parent = list(range(int(n)))
         self.size = [1] * int(n)
 
-    def find(self, a):
+    def find(self, a: int) -> int:
         parent = self.parent
         while parent[a] != a:
             parent[a] = parent[parent[a]]          # path halving
             a = parent[a]
         return a
 
-    def union(self, a, b):
+    def union(self, a: int, b: int) -> None:
         ra, rb = self.find(a), self.find(b)
         if ra == rb:
             return
@@ -755,7 +760,7 @@ class UnionFind:
         self.parent[rb] = ra
         self.size[ra] += self.size[rb]
 
-    def labels(self):
+    def labels(self) -> np.ndarray:
         """(n,) int ndarray: for each element, the smallest element of its set."""
         roots = np.array([self.find(a) for a in range(len(self.parent))], np.int64)
         smallest = np.full(len(roots), len(roots), np.int64)
@@ -786,7 +791,8 @@ def _check_pair_matches(pair_matches, n_features):
     return out, n_features
 
 
-def build_tracks(pair_matches, n_features, return_conflicts=False):
+def build_tracks(pair_matches: dict, n_features: Sequence[int],
+                 return_conflicts: bool = False) -> np.ndarray | tuple[np.ndarray, int]:
     """Chain pairwise matches into tracks with union-find; reject tracks with two features of one view.
 
     Every feature of every view is a node; each match ``(i, a) - (j, b)`` joins two nodes; a track is a
@@ -849,7 +855,7 @@ def build_tracks(pair_matches, n_features, return_conflicts=False):
     return (tracks, int(len(bad_labels))) if return_conflicts else tracks
 
 
-def track_pixels(tracks, xy):
+def track_pixels(tracks: ArrayLike, xy: Sequence[ArrayLike]) -> np.ndarray:
     """Pixels of tracks: ``(V, T, 2)``, NaN where a view does not see a track (like ``Scene.tracks``).
 
     Parameters
@@ -875,7 +881,7 @@ def track_pixels(tracks, xy):
     return out
 
 
-def verify_tracks(x, geometry, threshold_px):
+def verify_tracks(x: ArrayLike, geometry: dict, threshold_px: float) -> np.ndarray:
     """Check every track against the epipolar geometry of every pair of its views that has one.
 
     Union-find also joins observations that were never matched directly: ``a`` in view i matches ``b``
@@ -909,7 +915,7 @@ def verify_tracks(x, geometry, threshold_px):
     return keep
 
 
-def track_statistics(x):
+def track_statistics(x: ArrayLike) -> dict:
     """Counts of a track set: tracks, observations, and how many tracks have each length.
 
     Parameters
@@ -940,7 +946,7 @@ def track_statistics(x):
 # Which pairs to match
 # ---------------------------------------------------------------------------------------------
 
-def select_pairs(n_views, strategy="all", window=None):
+def select_pairs(n_views: int, strategy: str = "all", window: int | None = None) -> np.ndarray:
     """The pairs of views to match.
 
     ``'all'``: every pair (``V (V - 1) / 2``: fine for tens of views, quadratic beyond). ``'sequence'``:
@@ -984,7 +990,8 @@ def select_pairs(n_views, strategy="all", window=None):
     return np.column_stack([i[keep], j[keep]]).astype(np.int64)
 
 
-def retrieval_pairs(descriptors, n_neighbours, *, rng, vocabulary_size=256, sample=20000):
+def retrieval_pairs(descriptors: Sequence[ArrayLike], n_neighbours: int, *, rng: np.random.Generator,
+                    vocabulary_size: int = 256, sample: int = 20000) -> tuple[np.ndarray, np.ndarray]:
     """A shortlist of pairs from a bag of visual words (Sivic & Zisserman, "Video Google", ICCV 2003).
 
     A vocabulary of ``vocabulary_size`` words is learnt by k-means on a sample of all descriptors; each image
@@ -1066,18 +1073,20 @@ class MatchResult:
     table: list
     seconds: dict = field(default_factory=dict)
 
-    def totals(self):
+    def totals(self) -> dict:
         """Sum of each stage's survivors over all pairs."""
         keys = ("ratio", "mutual", "epipolar", "behind")
         return {k: int(sum(r[k] for r in self.table)) for k in keys}
 
-    def fundamental_matrices(self):
+    def fundamental_matrices(self) -> dict:
         """``{(i, j): F}`` of the pairs that kept their matches (for :func:`verify_tracks`)."""
         return {k: self.geometry[k].F for k in self.matches}
 
 
-def match_views(features, pairs, *, rng, K=None, ratio=0.8, cross_check=True, threshold_px=1.0, min_inliers=20,
-                guided=True, confidence=0.999, max_iter=400, progress=None):
+def match_views(features: Sequence[Features], pairs: ArrayLike, *, rng: np.random.Generator, K: ArrayLike | None = None,
+                ratio: float = 0.8, cross_check: bool = True, threshold_px: float = 1.0, min_inliers: int = 20,
+                guided: bool = True, confidence: float = 0.999, max_iter: int = 400,
+                progress: Callable[[int, int], None] | None = None) -> MatchResult:
     """Match every pair in ``pairs``: nearest neighbours, ratio test, mutual check, epipolar filter.
 
     Parameters
@@ -1177,7 +1186,8 @@ class TrackResult:
     n_inconsistent: int = 0
 
 
-def tracks_from_matches(features, result, *, verify_px=None):
+def tracks_from_matches(features: Sequence[Features], result: MatchResult, *,
+                        verify_px: float | None = None) -> TrackResult:
     """Tracks from the verified matches of :func:`match_views`: union-find, conflicts, and (optionally) the
     epipolar check of every pair of a track's views (:func:`verify_tracks`).
 

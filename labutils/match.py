@@ -14,6 +14,7 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +57,7 @@ class ProgressBar:
         self.stream.flush()
 
 
-def image_files(folder):
+def image_files(folder: str | Path) -> list[Path]:
     """The PNG and JPEG files of ``folder`` in sorted file-name order."""
     return sorted(p for p in Path(folder).iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
 
@@ -91,7 +92,7 @@ def _write_tracks_atomically(out, tracks):
         raise
 
 
-def run(args, log):
+def run(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     """Do the work of :func:`main` for parsed ``args``; ``log`` prints a line to stderr. Returns the track count."""
     folder = Path(args.image_dir)
     if not folder.is_dir():
@@ -163,7 +164,7 @@ def run(args, log):
     return stats["tracks"]
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     """The command line; returns the exit status (0, or 2 after a one-line error on stderr)."""
     parser = argparse.ArgumentParser(
         prog="python -m labutils.match",

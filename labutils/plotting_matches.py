@@ -1,8 +1,9 @@
 """Plot helpers for matches and tracks (notebook 07). Each takes an ``ax`` and returns it; none calls ``plt.show()``."""
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def side_by_side(image1, image2):
+def side_by_side(image1: ArrayLike, image2: ArrayLike) -> tuple[np.ndarray, int]:
     """The two images next to each other (grey or RGB, different heights allowed), and the x offset of image 2.
 
     >>> canvas, dx = side_by_side(np.zeros((4, 5), np.uint8), np.zeros((3, 2, 3), np.uint8))
@@ -20,7 +21,9 @@ def side_by_side(image1, image2):
     return canvas, ims[0].shape[1]
 
 
-def plot_match_lines(ax, image1, image2, x1, x2, good=None, max_lines=200, lw=0.6, labels=("kept", "rejected")):
+def plot_match_lines(ax, image1: ArrayLike, image2: ArrayLike, x1: ArrayLike, x2: ArrayLike,
+                     good: ArrayLike | None = None, max_lines: int = 200, lw: float = 0.6,
+                     labels: tuple[str, str] = ("kept", "rejected")):
     """Matches as lines between two images shown side by side: ``good`` in green, the others in red.
 
     Parameters
@@ -53,7 +56,7 @@ def plot_match_lines(ax, image1, image2, x1, x2, good=None, max_lines=200, lw=0.
     return ax
 
 
-def plot_track_lengths(ax, length_counts, width=0.8):
+def plot_track_lengths(ax, length_counts: dict, width: float = 0.8):
     """Histogram of track lengths for several track sets side by side (log scale).
 
     Parameters

@@ -13,6 +13,7 @@ for the face ``o + u a + v b``), done by OpenCV's ``warpPerspective``.
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._validation import as_points
 
@@ -26,7 +27,7 @@ CORNER_FACES = (
 )
 
 
-def look_at(C, target, up=(0.0, 0.0, 1.0)):
+def look_at(C: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
     """Rotation and translation of a camera at ``C`` looking at ``target`` (x right, y down, z forward).
 
     >>> R, t = look_at([0.0, -5.0, 0.0], [0.0, 0.0, 0.0])
@@ -44,7 +45,8 @@ def look_at(C, target, up=(0.0, 0.0, 1.0)):
     return R, -R @ C
 
 
-def blob_texture(size, rng, n_blobs=400, radius=(0.006, 0.05)):
+def blob_texture(size: int, rng: np.random.Generator, n_blobs: int = 400,
+                 radius: tuple[float, float] = (0.006, 0.05)) -> np.ndarray:
     """A grey texture of random discs and rectangles at several scales, lightly blurred: many SIFT blobs.
 
     Parameters
@@ -114,7 +116,7 @@ class RenderedScene:
         """(width, height)."""
         return (self.images[0].shape[1], self.images[0].shape[0])
 
-    def points_3d(self, view, x):
+    def points_3d(self, view: int, x: ArrayLike) -> np.ndarray:
         """The 3D points seen at pixels ``x`` (N, 2) of ``view``: the ray meets the face shown there.
 
         Returns
@@ -142,19 +144,21 @@ class RenderedScene:
             X[sel] = C + lam[:, None] * rays[sel]
         return X
 
-    def project(self, view, X):
+    def project(self, view: int, X: ArrayLike) -> np.ndarray:
         """Pixels of world points ``X`` (N, 3) in ``view`` (NaN stays NaN)."""
         X = np.asarray(X, float)
         y = (X @ self.R[view].T + self.t[view]) @ self.K.T
         return y[:, :2] / y[:, 2:]
 
-    def transfer(self, i, j, x):
+    def transfer(self, i: int, j: int, x: ArrayLike) -> np.ndarray:
         """The true positions in view ``j`` of pixels ``x`` of view ``i`` (NaN where unknown)."""
         return self.project(j, self.points_3d(i, x))
 
 
-def render_corner(n_views=6, image_size=(320, 240), *, rng, arc_deg=50.0, distance=2.6, height=1.6,
-                  texture_px=768, n_blobs=400, radius=(0.006, 0.05), noise_grey=1.0):
+def render_corner(n_views: int = 6, image_size: tuple[int, int] = (320, 240), *, rng: np.random.Generator,
+                  arc_deg: float = 50.0, distance: float = 2.6, height: float = 1.6, texture_px: int = 768,
+                  n_blobs: int = 400, radius: tuple[float, float] = (0.006, 0.05),
+                  noise_grey: float = 1.0) -> RenderedScene:
     """Render the inside corner of a box (three textured unit squares) from ``n_views`` cameras on an arc.
 
     The cameras stand at ``distance`` from the corner's vertical axis and ``height`` above the floor,

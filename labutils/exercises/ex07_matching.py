@@ -1,8 +1,10 @@
 """Self-checks of notebook 07 (matching and tracks): the ratio test, the mutual check, union-find tracks."""
+from collections.abc import Callable
+
 import numpy as np
 
 from ..features import build_tracks, mutual_check, ratio_test
-from . import run_checks
+from . import CheckReport, run_checks
 
 # ---------------------------------------------------------------------------------------------
 # The ratio test
@@ -55,7 +57,7 @@ def _diagnose_ratio(keep, dist, ratio):
             "nearest; d2 = dist[:, 1], the second nearest)")
 
 
-def check_ratio_test(func, verbose=True):
+def check_ratio_test(func: Callable, verbose: bool = True) -> CheckReport:
     """Self-check of the exercise ``ratio_test(dist, ratio=0.8) -> keep`` (Lowe 2004, Sec. 7.1).
 
     Cases: a hand-made list (a clear match, an ambiguous one, duplicate descriptors at distance 0, a second
@@ -143,7 +145,7 @@ def _random_lists(seed, n1=300, n2=280):
     return m12, m21
 
 
-def check_mutual_check(func, verbose=True):
+def check_mutual_check(func: Callable, verbose: bool = True) -> CheckReport:
     """Self-check of the exercise ``mutual_check(m12, m21) -> matches (M, 2)``.
 
     Cases: a hand-made example (with a feature that failed the ratio test while ``m21[-1]`` points back at
@@ -237,7 +239,7 @@ def _random_matches(seed, V=5, n=60):
     return pm, [n + 10] * V
 
 
-def check_build_tracks(func, verbose=True):
+def check_build_tracks(func: Callable, verbose: bool = True) -> CheckReport:
     """Self-check of the exercise ``build_tracks(pair_matches, n_features) -> tracks (V, T)``.
 
     Cases: a chain over three views, a conflict (two features of one view in one track), and random matches
