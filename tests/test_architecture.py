@@ -20,15 +20,17 @@ LAYERS = {
     "foundation": ["_validation", "_cli", "_blas", "datapath", "datasets", "fetch", "ransac", "robust"],
     "geometry": ["geometry"],
     "records and files": ["metrics", "scene", "formats", "bal", "middlebury", "ply"],
-    "data": ["synthetic", "data"],
+    "data": ["synthetic", "synthetic_images", "data"],
     "two views": ["triangulation", "epipolar", "gold_standard", "essential"],
+    "correspondences": ["features", "match"],
     "camera pose": ["pnp"],
     "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
     "reconstruction": ["twoview", "reconstruction", "sfm"],
     "precision": ["uncertainty", "noise_study"],
     "the 3D model": ["carving", "carve"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
-    "presentation and tools": ["plotting", "plotting_calibration", "carving_plots", "bench", "exercises",
+    "presentation and tools": ["plotting", "plotting_calibration", "plotting_matches", "carving_plots", "bench",
+                               "exercises",
                                "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]
@@ -131,7 +133,7 @@ def test_public_names_resolve():
 
 def test_command_lines_do_not_warn():
     """``python -m labutils.X --help`` exits 0 and prints no RuntimeWarning ('found in sys.modules')."""
-    for cmd in ("sfm", "bundle", "bench", "data", "notebook_filter", "calibrate", "carve"):
+    for cmd in ("sfm", "bundle", "bench", "data", "notebook_filter", "calibrate", "carve", "match"):
         r = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", f"labutils.{cmd}", "--help"],
                            capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 0 and "usage" in r.stdout and "Warning" not in r.stderr, (cmd, r.stderr)

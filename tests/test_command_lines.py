@@ -17,7 +17,7 @@ from labutils.formats import write_tracks
 from labutils.synthetic import make_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ["sfm", "bundle", "bench", "data", "calibrate", "carve", "notebook_filter", "exercises"]
+COMMANDS = ["sfm", "bundle", "bench", "data", "calibrate", "carve", "match", "notebook_filter", "exercises"]
 
 
 def run(module, *args, cwd=None, timeout=300):
