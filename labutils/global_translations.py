@@ -242,7 +242,8 @@ def robust_centres_from_points(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, ma
     X : (T, 3) ndarray
         As in :func:`centres_from_points`.
     inliers : (V, T) bool ndarray
-        The observations that end within ``threshold_px``, in front of their camera.
+        The observations that end within ``threshold_px``, in front of their camera, of tracks keeping two or more
+        of them.
     """
     tracks, Ks, R, have, use = _inputs(tracks, K, R, mask)
     threshold_px = as_positive(threshold_px, "threshold_px")
@@ -259,7 +260,8 @@ def robust_centres_from_points(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, ma
         w = np.where(used, np.maximum(w, 1e-12 * np.nanmax(w)), 1.0)
         C, X, used, _ = _points_method(rays, used, w, min_angle_deg)
     err, dep = _pixel_errors(tracks, Ks, R, C, X, used)
-    return C, X, used & (dep > 0) & (err <= threshold_px)
+    inliers = used & (dep > 0) & (err <= threshold_px)
+    return C, X, inliers & (inliers.sum(0) >= 2)[None]          # one good ray alone does not confirm a point
 
 
 def _pixel_errors(tracks, Ks, R, C, X, use):

@@ -261,7 +261,7 @@ def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigm
     """Covariance of a camera pose estimated from known points: ``σ² (JᵀJ)⁻¹`` (H&Z Sec. 5.2; the Cramér–Rao bound).
 
     ``J`` (2N × 6) is the Jacobian of the N reprojections with respect to ``(ω, t)``, the rotation perturbed on
-    the left, ``R <- exp([ω]×) R`` (:func:`labutils.pnp.pose_jacobian` at 0): with ``p = R X + t`` and
+    the left, ``R <- exp([ω]×) R`` (:func:`labutils.pnp.pose_jacobian` at ω = 0): with ``p = R X + t`` and
     ``u = K p``, ``∂u/∂ω = A (-[R X]×)``, ``∂u/∂t = A``, ``A = (K[:2] - ũ K[2]) / u_3`` (ũ the pixel).
 
     Parameters
@@ -300,7 +300,7 @@ def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigm
     depth = X @ R[2] + t[2]
     if not np.all(depth > 0):
         raise ValueError(f"X rows {np.flatnonzero(~(depth > 0))[:5].tolist()} are not in front of the camera")
-    J = pose_jacobian(np.zeros(6), X, np.zeros((len(X), 2)), K, R)
+    J = pose_jacobian(np.r_[0.0, 0.0, 0.0, t], X, np.zeros((len(X), 2)), K, R)
     H = J.T @ J
     s = np.linalg.svd(H, compute_uv=False)
     if s[-1] <= 1e-12 * s[0]:
