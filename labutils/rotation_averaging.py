@@ -149,6 +149,34 @@ def relative_rotation_errors_deg(R: ArrayLike, pairs: ArrayLike, R_rel: ArrayLik
     return np.degrees(np.linalg.norm(_edge_logs(R, pairs, R_rel), axis=1))
 
 
+def aligned_rotation_errors_deg(R_est: ArrayLike, R_true: ArrayLike) -> np.ndarray:
+    """(V,) angle in degrees between ``R_est[i] Q`` and ``R_true[i]`` for the global rotation ``Q`` that fits best.
+
+    Rotations from relative measurements are defined up to a rotation of the world, ``R_i -> R_i Q``; ``Q`` is the
+    projection onto SO(3) of ``Σ R_est[i]ᵀ R_true[i]`` (the chordal fit). Views with a NaN estimate get NaN.
+
+    >>> from labutils.geometry import rotation_from_angle_axis
+    >>> R = rotation_from_angle_axis(np.random.default_rng(0).normal(size=(4, 3)))
+    >>> Q = rotation_from_angle_axis([0.3, 0.0, 1.0])
+    >>> bool(aligned_rotation_errors_deg(R @ Q, R).max() < 1e-6)
+    True
+    """
+    R_true = as_rotations(R_true, "R_true")
+    R_est = as_array(R_est, "R_est", f"({len(R_true)}, 3, 3)")
+    if R_est.shape != R_true.shape:
+        raise ValueError(f"R_est must have shape {R_true.shape} like R_true (NaN rows for views without an estimate); "
+                         f"got {R_est.shape}")
+    ok = np.isfinite(R_est).all((1, 2))
+    if not ok.any():
+        raise ValueError("R_est has no finite rotation")
+    Re = as_rotations(R_est[ok], "R_est")
+    Q = project_to_so3(np.einsum("vji,vjk->ik", Re, R_true[ok]))
+    err = np.full(len(R_true), np.nan)
+    err[ok] = np.degrees(np.linalg.norm(angle_axis_from_rotation(project_to_so3(
+        np.swapaxes(R_true[ok], 1, 2) @ Re @ Q)), axis=1))
+    return err
+
+
 def _edge_logs(R, pairs, R_rel):
     """(E, 3) ``log(R_iᵀ R_ijᵀ R_j)``: each edge's discrepancy as an angle-axis vector (zero when consistent)."""
     i, j = pairs[:, 0], pairs[:, 1]

@@ -27,7 +27,8 @@ LAYERS = {
     "reconstruction": ["twoview", "reconstruction", "view_selection", "global_sfm", "sfm"],
     "precision": ["uncertainty", "noise_study"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
-    "presentation and tools": ["plotting", "plotting_calibration", "bench", "exercises", "notebook_filter"],
+    "presentation and tools": ["plotting", "plotting_calibration", "plotting_views", "bench", "exercises",
+                               "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]
 

@@ -5,6 +5,7 @@ import pytest
 from labutils.geometry import rotation_from_angle_axis
 from labutils.metrics import rotation_error_deg
 from labutils.rotation_averaging import (
+    aligned_rotation_errors_deg,
     as_view_graph,
     chordal_rotation_averaging,
     largest_component,
@@ -172,3 +173,16 @@ def test_rotation_averaging_with_noise_and_outliers():
     # the least-squares error of the 90 good edges is about 1·√14/15 = 0.25° per view: allow twice that
     assert np.sqrt(np.mean(aligned(res.R, R) ** 2)) < 0.5
     assert np.all(res.residuals_deg[wrong] > 10)
+
+
+def test_aligned_rotation_errors():
+    pairs, R_rel, R, _ = graph(5, n_views=6)
+    Q = rotation_from_angle_axis([0.2, -1.0, 0.4])
+    assert np.nanmax(aligned_rotation_errors_deg(R @ Q, R)) < 1e-9
+    R_est = R @ Q
+    R_est[2] = rotation_from_angle_axis([0.0, 0.0, np.radians(3.0)]) @ R_est[2]
+    R_est[4] = np.nan
+    err = aligned_rotation_errors_deg(R_est, R)
+    assert np.isnan(err[4]) and 2.0 < err[2] < 3.0 and np.nanmax(np.delete(err, [2, 4])) < 1.0
+    with pytest.raises(ValueError, match=r"R_est must have shape \(6, 3, 3\)"):
+        aligned_rotation_errors_deg(R_est[:3], R)
