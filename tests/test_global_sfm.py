@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from labutils.formats import write_tracks
-from labutils.geometry import relative_pose
+from labutils.geometry import P_from_KRt, project, relative_pose
 from labutils.global_sfm import ViewGraph, candidate_pairs, global_sfm, view_graph
 from labutils.metrics import rotation_error_deg
 from labutils.reconstruction import camera_errors
@@ -52,6 +52,17 @@ def test_noise_free_exact(layout, n_views):
     rot, cen = camera_errors(rec, s.R, s.t)
     assert rec.registered.all() and rot.max() < 1e-4 and cen.max() < 1e-6
     assert rec.order == [] and rec.timings["total"] > 0 and rec.log
+
+
+def test_per_view_calibration_exact():
+    s = scene("turntable", 10, seed=5, n_points=150)
+    f = 1500 * (1 + 0.1 * np.sin(np.arange(10)))
+    K = np.stack([np.array([[fi, 0.5, 360 + i], [0, 0.98 * fi, 288 - i], [0, 0, 1]]) for i, fi in enumerate(f)])
+    x = np.stack([project(P_from_KRt(K[v], s.R[v], s.t[v]), s.X) for v in range(10)])
+    x[~s.visible] = np.nan
+    rec = global_sfm(x, K, rng=np.random.default_rng(0))
+    rot, cen = camera_errors(rec, s.R, s.t)
+    assert rec.registered.all() and rot.max() < 1e-4 and cen.max() < 1e-6
 
 
 @pytest.mark.parametrize("layout, n_views, seed", [("turntable", 12, 1), ("forward", 8, 2)])
