@@ -22,7 +22,9 @@ All thresholds are in pixels; every bundle adjustment is :func:`labutils.bundle.
 the Schur complement) with a robust loss (Cauchy, scale 1 px, by default).
 
 The result is a :class:`Reconstruction`. Run it from the command line with
-``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
+``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N] [--global]``;
+``--global`` runs global SfM instead (:func:`labutils.global_sfm.global_sfm`: rotation averaging, translations,
+BA), finished by the same last stage, :func:`bundle_from_cameras`.
 """
 import contextlib
 import json
@@ -37,10 +39,12 @@ from ._validation import as_array, as_calibration, as_positive, as_rng, as_rotat
 from .bundle import bundle_adjust
 from .formats import ply_text, read_calibration, read_tracks
 from .geometry import camera_center
+from .global_sfm import global_sfm
 from .pnp import pnp_ransac
 from .reconstruction import Reconstruction, masked_reprojection_errors
 from .triangulation import ray_angles_deg, triangulate_tracks
 from .twoview import two_view_reconstruction
+from .view_selection import as_scores, as_strategy, next_view  # noqa: F401 (next_view: public here too)
 
 
 def covisibility(tracks):
@@ -127,34 +131,6 @@ def _pair(tracks, i, j):
     both = np.all(np.isfinite(tracks[i]), axis=-1) & np.all(np.isfinite(tracks[j]), axis=-1)
     idx = np.flatnonzero(both)
     return tracks[i, idx], tracks[j, idx], idx
-
-
-def next_view(visible_points, registered, skip=()):
-    """The unregistered view that sees the most triangulated points (the next to register).
-
-    Parameters
-    ----------
-    visible_points : (V,) int array_like
-        For each view, how many triangulated points it observes.
-    registered : (V,) bool array_like
-    skip : collection of int
-        Views not to propose now (e.g. whose registration just failed).
-
-    Returns
-    -------
-    int or None
-        None when no candidate is left.
-
-    >>> next_view([5, 9, 7, 3], [False, True, False, False])
-    2
-    """
-    counts = np.asarray(visible_points, float).copy()
-    counts[np.asarray(registered, bool)] = -1
-    for v in skip:
-        counts[v] = -1
-    if counts.max() <= 0:
-        return None
-    return int(np.argmax(counts))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -294,7 +270,8 @@ def _result(st, order, timings, log):
 def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, init_pair=None, threshold_px=4.0,
                     min_angle_deg=1.5, init_min_angle_deg=3.0,
                     n_init_candidates=6, min_inliers=15, local_ba_views=4, global_ba_growth=1.4, loss="cauchy",
-                    f_scale=1.0, ba_max_iter=5, final_max_iter=100, confidence=0.9999, verbose=False):
+                    f_scale=1.0, ba_max_iter=5, final_max_iter=100, confidence=0.9999, verbose=False,
+                    view_selection="most_points", on_register=None):
     """Incremental structure from motion from calibrated tracks (module docstring; H&Z Ch. 18).
 
     Parameters
@@ -327,6 +304,14 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
         RANSAC confidence.
     verbose : bool
         Print the log as it is written.
+    view_selection : str or callable
+        How the next view is chosen among those that see ``min_inliers`` triangulated points:
+        ``'most_points'`` (the most points), ``'pyramid'`` (the best-spread points) or ``'sequential'`` (the
+        input order), or a function ``scores(tracks, visible, registered, order) -> (V,)``
+        (:mod:`labutils.view_selection`).
+    on_register : callable, optional
+        Called after each view is registered (and its points triangulated and adjusted) with a snapshot of the
+        model as a :class:`Reconstruction` (e.g. to follow the pose errors as views are added).
 
     Returns
     -------
@@ -354,6 +339,9 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
     as_rng(rng)
     threshold_px = as_positive(threshold_px, "threshold_px")
     min_angle_deg = as_positive(min_angle_deg, "min_angle_deg", allow_zero=True)
+    score = as_strategy(view_selection)
+    if on_register is not None and not callable(on_register):
+        raise ValueError(f"on_register must be a function of the model (a Reconstruction); got {on_register!r}")
     st = _State(tracks, Ks)
     timings = {k: 0.0 for k in ("initial_pair", "pnp", "triangulation", "local_ba", "global_ba")}
     log = []
@@ -397,8 +385,11 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
     n_last_global, failed = 2, {}
     while True:
         vis = st.visible_counts()
-        v = next_view(vis, st.reg, skip=[w for w, n in failed.items() if vis[w] <= n])
-        if v is None or vis[v] < min_inliers:
+        scores = as_scores(score(tracks, st.seen & ~st.rejected & st.triangulated[None], st.reg.copy(), list(order)),
+                           V)
+        v = next_view(vis, st.reg, skip=[w for w, n in failed.items() if vis[w] <= n], scores=scores,
+                      min_points=min_inliers)
+        if v is None:
             break
         t0 = time.perf_counter()
         idx = np.flatnonzero(st.seen[v] & ~st.rejected[v] & st.triangulated)
@@ -440,6 +431,8 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
                                           f"{res.seconds:.2f} s, {res.residuals.shape[0]} obs)")
         note(f"view {v}: {inl.sum()} PnP inliers of {idx.size}, {n_new} new points; {kind} BA {ba_note}; "
              f"{n_bad} observations rejected, {n_drop} points dropped; {int(st.triangulated.sum())} points")
+        if on_register is not None:
+            on_register(_result(st, order, timings, log))
     missing = np.flatnonzero(~st.reg)
     if missing.size:
         note(f"views not registered: {missing.tolist()}")
@@ -522,7 +515,8 @@ def bundle_from_cameras(tracks, K, R, t, *, threshold_px=4.0, min_angle_deg=1.5,
 def _parser():
     parser = _cli.Parser(
         prog="python -m labutils.sfm",
-        description="Incremental structure from motion from VGG-format tracks and known calibration.")
+        description="Structure from motion from VGG-format tracks and known calibration: incremental, or global "
+                    "with --global.")
     parser.add_argument("tracks", help="track file: one row per track, 'x y' per view, -1 -1 where unseen")
     parser.add_argument("K", help="calibration: one 3x3 matrix shared by all views, or one per view stacked (3V rows)")
     parser.add_argument("--out", required=True, help="the result, JSON: cameras (null if unregistered) and points")
@@ -530,11 +524,22 @@ def _parser():
     parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
     parser.add_argument("--threshold", type=float, default=4.0, help="pixel threshold (default 4)")
     parser.add_argument("--quiet", action="store_true", help="no progress log, only the summary line")
+    parser.add_argument("--global", dest="global_sfm", action="store_true",
+                        help="global SfM (rotation averaging, translations from the points, BA) instead of adding "
+                             "the views one at a time; the same last stage (bundle_from_cameras) finishes both")
     return parser
 
 
+def _global_then_final(tracks, K, rng, threshold_px, verbose):
+    """Global SfM (:func:`labutils.global_sfm.global_sfm`), then the incremental pipeline's last stage."""
+    start = global_sfm(tracks, K, rng=rng, threshold_px=threshold_px, verbose=verbose)
+    rec = bundle_from_cameras(tracks, K, start.R, start.t, threshold_px=threshold_px)
+    rec.timings["total"] += start.timings["total"]
+    return rec
+
+
 def main(argv=None):
-    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
+    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N] [--global]``.
 
     The progress log goes to stderr, the summary to stdout. Exit status 0 on success; 2 for a bad input file or
     argument, an output that cannot be written (checked before the reconstruction), or a reconstruction that
@@ -548,8 +553,11 @@ def main(argv=None):
         raise _cli.CommandError(f"--threshold must be a positive number of pixels; got {args.threshold}")
     try:
         with contextlib.redirect_stdout(sys.stderr):
-            rec = incremental_sfm(tracks, K, rng=np.random.default_rng(args.seed), threshold_px=args.threshold,
-                                  verbose=not args.quiet)
+            if args.global_sfm:
+                rec = _global_then_final(tracks, K, np.random.default_rng(args.seed), args.threshold, not args.quiet)
+            else:
+                rec = incremental_sfm(tracks, K, rng=np.random.default_rng(args.seed), threshold_px=args.threshold,
+                                      verbose=not args.quiet)
     except ValueError as exc:
         raise _cli.CommandError(f"{args.tracks}: the reconstruction failed: {exc}") from None
     _cli.write_atomically(outs[0], json.dumps(rec.to_dict()) + "\n")

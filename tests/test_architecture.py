@@ -23,14 +23,14 @@ LAYERS = {
     "data": ["synthetic", "synthetic_images", "data"],
     "two views": ["triangulation", "epipolar", "gold_standard", "essential"],
     "correspondences": ["features", "match"],
-    "camera pose": ["pnp"],
+    "camera pose": ["pnp", "rotation_averaging", "global_translations"],
     "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
-    "reconstruction": ["twoview", "reconstruction", "sfm"],
+    "reconstruction": ["twoview", "reconstruction", "view_selection", "global_sfm", "sfm"],
     "precision": ["uncertainty", "noise_study"],
     "the 3D model": ["carving", "carve"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
-    "presentation and tools": ["plotting", "plotting_calibration", "plotting_matches", "carving_plots", "bench",
-                               "exercises",
+    "presentation and tools": ["plotting", "plotting_calibration", "plotting_matches", "plotting_views",
+                               "carving_plots", "bench", "exercises",
                                "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]

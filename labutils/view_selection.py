@@ -1,0 +1,308 @@
+"""Next-best-view: which view incremental structure from motion registers next.
+
+Each strategy scores every view from what the growing model knows (which views are registered, in which
+order, and which triangulated points each view sees); :func:`next_view` then takes the best-scoring view among
+those that see enough points to be registered (``min_inliers`` of :func:`labutils.sfm.incremental_sfm`).
+The strategies:
+
+- ``'most_points'`` — the number of triangulated points the view sees (Snavely et al., "Photo tourism", 2006):
+  the more 2D–3D correspondences, the more PnP has to go on. The pipeline's default.
+- ``'pyramid'`` — the visibility-pyramid score of those points (Schönberger & Frahm, "Structure-from-Motion
+  Revisited", CVPR 2016, Sec. 4.2): points spread over the whole image fix a pose better than as many points
+  in one corner (:func:`pyramid_score`).
+- ``'sequential'`` — the input order, as for a video or a turntable: the first view after the last one
+  registered (cyclically) that can be registered.
+
+A strategy is a function ``scores(tracks, visible, registered, order) -> (V,)`` (higher is better); a callable
+with that signature can be passed to :func:`labutils.sfm.incremental_sfm` as ``view_selection`` too.
+
+:func:`pose_covariance` gives what the scores stand in for: how precisely a view's pose would be determined by
+the points it sees (the Cramér–Rao bound of PnP), which can be computed only once the pose is known.
+"""
+import warnings
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import as_array, as_calibration, as_count, as_points, as_positive, as_rotation, as_tracks
+from .pnp import pose_jacobian
+
+STRATEGIES = ("most_points", "pyramid", "sequential")
+PYRAMID_LEVELS = 6          # as COLMAP (kNumPoint3DVisibilityPyramidLevels)
+
+
+def pyramid_score(x: ArrayLike, extent: ArrayLike, levels: int = PYRAMID_LEVELS) -> float:
+    """Visibility-pyramid score of the points ``x`` seen in an image (Schönberger & Frahm 2016, Sec. 4.2).
+
+    Level ``l = 1 … L`` divides the image into ``K_l × K_l`` cells, ``K_l = 2^l``; a cell is *full* when at least
+    one point falls in it; the score is ``Σ_l K_l · (number of full cells at level l)``. A point adds to the
+    score only where it fills an empty cell, and a coarse cell weighs less than the fine cells it holds, so
+    well-spread points score higher than as many points clustered together. The largest possible score is
+    ``Σ_l K_l³``. (COLMAP's code weighs a full cell by ``K_l²`` instead.)
+
+    Parameters
+    ----------
+    x : (N, 2) array_like
+        Pixels (N may be 0).
+    extent : (2,) or (4,) array_like
+        The image size ``(width, height)``, or a box ``(x_min, y_min, x_max, y_max)``; points outside count in
+        the border cells.
+    levels : int
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> pyramid_score([[10, 10]], (100, 100), levels=2)                     # one cell at each level: 2 + 4
+    6.0
+    >>> pyramid_score([[10, 10], [90, 90]], (100, 100), levels=2), pyramid_score([[10, 10], [12, 12]], (100, 100), 2)
+    (12.0, 6.0)
+    """
+    x = np.asarray(x, float)
+    x = np.zeros((0, 2)) if x.size == 0 else as_points(x, "x")
+    box = _as_extent(extent)
+    levels = as_count(levels, "levels", 1)
+    return float(_pyramid(x[None], np.ones((1, len(x)), bool), box[None], levels)[0])
+
+
+def _as_extent(extent, name="extent"):
+    e = as_array(extent, name, "(2,) or (4,)")
+    if e.shape == (2,):
+        e = np.array([0.0, 0.0, e[0], e[1]])
+    if e.shape != (4,) or not np.all(np.isfinite(e)) or not (e[2] > e[0] and e[3] > e[1]):
+        raise ValueError(f"{name} must be (width, height) or a box (x_min, y_min, x_max, y_max) with a positive "
+                         f"width and height; got {np.asarray(extent).tolist()}")
+    return e
+
+
+def _pyramid(x, mask, boxes, levels):
+    """(V,) scores of the points ``x`` (V, T, 2) where ``mask`` (V, T), each view in its box (V, 4)."""
+    V = x.shape[0]
+    n = 2 ** levels
+    v, k = np.nonzero(mask)
+    b = boxes[v]
+    cx = np.clip(np.floor(n * (x[v, k, 0] - b[:, 0]) / (b[:, 2] - b[:, 0])), 0, n - 1).astype(np.int64)
+    cy = np.clip(np.floor(n * (x[v, k, 1] - b[:, 1]) / (b[:, 3] - b[:, 1])), 0, n - 1).astype(np.int64)
+    score = np.zeros(V)
+    for level in range(1, levels + 1):
+        shift = levels - level
+        cell = (v * n + (cy >> shift)) * n + (cx >> shift)     # a cell id unique within the view
+        full = np.unique(cell) // (n * n)                        # the view of each full cell
+        score += 2 ** level * np.bincount(full, minlength=V)
+    return score
+
+
+def observation_extent(tracks: ArrayLike) -> np.ndarray:
+    """(V, 4) box ``(x_min, y_min, x_max, y_max)`` of each view's observations: the image when its size is unknown.
+
+    >>> x = np.array([[[1.0, 2.0], [5.0, 9.0]]])
+    >>> observation_extent(x)
+    array([[1., 2., 5., 9.]])
+    """
+    tracks = as_tracks(tracks)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)            # a view without observations: 'All-NaN slice'
+        lo, hi = np.nanmin(tracks, axis=1), np.nanmax(tracks, axis=1)
+    box = np.concatenate([lo, hi], axis=1)
+    flat = ~(box[:, 2] > box[:, 0]) | ~(box[:, 3] > box[:, 1])            # 0 or 1 observations, or a line
+    box[flat] = np.nan_to_num(box[flat]) + [0.0, 0.0, 1.0, 1.0]
+    return box
+
+
+def _check(tracks, visible, registered, order):
+    tracks = as_tracks(tracks)
+    V, T = tracks.shape[:2]
+    vis = as_array(visible, "visible", f"({V}, {T})")
+    if vis.shape != (V, T) or not np.all((vis == 0) | (vis == 1)):
+        raise ValueError(f"visible must be a boolean array of shape ({V}, {T}) like tracks[..., 0]; got {vis.shape}")
+    reg = as_array(registered, "registered", f"({V},)")
+    if reg.shape != (V,) or not np.all((reg == 0) | (reg == 1)):
+        raise ValueError(f"registered must be a boolean array of shape ({V},); got {reg.shape}")
+    order = [int(v) for v in order]
+    if any(not 0 <= v < V for v in order):
+        raise ValueError(f"order must list views in 0..{V - 1}; got {order}")
+    return tracks, vis.astype(bool) & np.all(np.isfinite(tracks), axis=-1), reg.astype(bool), order
+
+
+def most_points_scores(tracks: ArrayLike, visible: ArrayLike, registered: ArrayLike, order=()) -> np.ndarray:
+    """(V,) how many triangulated points each view sees (``visible.sum(1)``): the ``'most_points'`` strategy.
+
+    >>> most_points_scores(np.zeros((2, 3, 2)), [[1, 1, 0], [1, 0, 0]], [False, False])
+    array([2., 1.])
+    """
+    _, vis, _, _ = _check(tracks, visible, registered, order)
+    return vis.sum(1).astype(float)
+
+
+def pyramid_scores(tracks: ArrayLike, visible: ArrayLike, registered: ArrayLike, order=(), *,
+                   levels: int = PYRAMID_LEVELS, extent: ArrayLike = None) -> np.ndarray:
+    """(V,) visibility-pyramid score (:func:`pyramid_score`) of the triangulated points each view sees.
+
+    Parameters
+    ----------
+    tracks : (V, T, 2) array_like
+    visible : (V, T) bool array_like
+        The observations of triangulated points (the candidates' 2D–3D correspondences).
+    registered : (V,) bool array_like
+    order : sequence of int
+        Not used (the common signature of a strategy).
+    levels : int
+    extent : (2,) or (V, 4) array_like, optional
+        The image size, or one box per view; default :func:`observation_extent` (the box of all of each view's
+        observations, triangulated or not).
+
+    Examples
+    --------
+    >>> x = np.array([[[0.0, 0], [100, 100], [10, 10]], [[0.0, 0], [100, 100], [90, 90]]])
+    >>> pyramid_scores(x, [[1, 0, 1], [1, 0, 1]], [False, False], levels=2, extent=(100, 100))
+    array([ 6., 12.])
+    """
+    tracks, vis, _, _ = _check(tracks, visible, registered, order)
+    V = tracks.shape[0]
+    levels = as_count(levels, "levels", 1)
+    if extent is None:
+        boxes = observation_extent(tracks)
+    elif np.shape(extent) in ((2,), (4,)):
+        boxes = np.repeat(_as_extent(extent)[None], V, axis=0)
+    else:
+        e = as_array(extent, "extent", f"(2,), (4,) or ({V}, 4)")
+        if e.shape != (V, 4):
+            raise ValueError(f"extent must be (width, height), a box (4,), or one box per view ({V}, 4); got {e.shape}")
+        boxes = np.stack([_as_extent(b, f"extent[{k}]") for k, b in enumerate(e)])
+    return _pyramid(np.nan_to_num(tracks), vis, boxes, levels)
+
+
+def sequential_scores(tracks: ArrayLike, visible: ArrayLike, registered: ArrayLike, order=()) -> np.ndarray:
+    """(V,) the input order: highest for the first view after the last registered one, going round cyclically.
+
+    Only the views that see triangulated points compete (:func:`next_view` skips the others),
+    so a view that cannot be registered yet is passed over until it can.
+
+    >>> sequential_scores(np.zeros((5, 1, 2)), np.ones((5, 1)), [True, True, False, False, False], [0, 1])
+    array([-4., -5., -1., -2., -3.])
+    """
+    _, _, _, order = _check(tracks, visible, registered, order)
+    V = np.shape(registered)[0]
+    last = order[-1] if order else -1
+    return -((np.arange(V) - last - 1) % V + 1).astype(float)
+
+
+SCORES = {"most_points": most_points_scores, "pyramid": pyramid_scores, "sequential": sequential_scores}
+
+
+def as_strategy(view_selection):
+    """The scoring function of a strategy name (:data:`STRATEGIES`) or of a callable, or ``ValueError``.
+
+    >>> as_strategy("pyramid") is pyramid_scores
+    True
+    """
+    if callable(view_selection):
+        return view_selection
+    if view_selection in SCORES:
+        return SCORES[view_selection]
+    raise ValueError(f"view_selection must be one of {STRATEGIES} or a function scores(tracks, visible, registered, "
+                     f"order) -> (V,); got {view_selection!r}")
+
+
+def next_view(visible_points, registered, skip=(), scores=None, min_points=1):
+    """The view to register next: the best-scoring unregistered view that sees enough triangulated points.
+
+    Parameters
+    ----------
+    visible_points : (V,) int array_like
+        For each view, how many triangulated points it observes.
+    registered : (V,) bool array_like
+    skip : collection of int
+        Views not to propose now (e.g. whose registration just failed).
+    scores : (V,) array_like, optional
+        The strategy's score of each view, higher is better (one of this module's strategies); default
+        ``visible_points`` (the view that sees the most points).
+    min_points : int
+        Fewest triangulated points a candidate must see (PnP needs them: ``min_inliers``).
+
+    Returns
+    -------
+    int or None
+        None when no candidate is left. Ties go to the lowest view.
+
+    >>> next_view([5, 9, 7, 3], [False, True, False, False])
+    2
+    >>> next_view([5, 9, 7, 3], [False, True, False, False], scores=[0, 0, 1, 2], min_points=4)
+    2
+    """
+    counts = np.asarray(visible_points, float)
+    ok = (counts >= max(min_points, 1)) & ~np.asarray(registered, bool)
+    ok[list(skip)] = False
+    if not ok.any():
+        return None
+    s = counts if scores is None else np.asarray(scores, float)
+    return int(np.flatnonzero(ok)[np.argmax(s[ok])])
+
+
+def as_scores(scores: ArrayLike, n_views: int) -> np.ndarray:
+    """A strategy's output checked: ``(n_views,)`` numbers, no NaN (``ValueError`` naming ``view_selection``).
+
+    >>> as_scores([1, 2], 3)
+    Traceback (most recent call last):
+    ...
+    ValueError: view_selection must return one score per view, shape (3,); got shape (2,)
+    """
+    s = as_array(scores, "the scores of view_selection", f"({n_views},)")
+    if s.shape != (n_views,):
+        raise ValueError(f"view_selection must return one score per view, shape ({n_views},); got shape {s.shape}")
+    if np.isnan(s).any():
+        raise ValueError("view_selection returned NaN scores")
+    return s
+
+
+def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigma_px: float = 1.0) -> np.ndarray:
+    """Covariance of a camera pose estimated from known points: ``σ² (JᵀJ)⁻¹`` (H&Z Sec. 5.2; the Cramér–Rao bound).
+
+    ``J`` (2N × 6) is the Jacobian of the N reprojections with respect to ``(ω, t)``, the rotation perturbed on
+    the left, ``R <- exp([ω]×) R`` (:func:`labutils.pnp.pose_jacobian` at ω = 0): with ``p = R X + t`` and
+    ``u = K p``, ``∂u/∂ω = A (-[R X]×)``, ``∂u/∂t = A``, ``A = (K[:2] - ũ K[2]) / u_3`` (ũ the pixel).
+
+    Parameters
+    ----------
+    X : (N, 3) array_like
+        The points the view sees, N >= 3, in front of it.
+    K, R : (3, 3) array_like
+    t : (3,) array_like
+    sigma_px : float
+        Pixel noise per coordinate.
+
+    Returns
+    -------
+    (6, 6) ndarray
+        Rotation (radians) first, then translation.
+
+    Raises
+    ------
+    ValueError
+        Bad input, a point behind the camera, or a pose the points do not determine (singular ``JᵀJ``).
+
+    Examples
+    --------
+    >>> X = np.array([[0., 0, 5], [1, 0, 5], [0, 1, 5], [1, 1, 6]])
+    >>> C = pose_covariance(X, np.diag([500., 500, 1]), np.eye(3), np.zeros(3))
+    >>> C.shape, bool(np.allclose(C, C.T))
+    ((6, 6), True)
+    """
+    X = as_points(X, "X", dim=3, min_n=3)
+    K = as_calibration(K)
+    R = as_rotation(R)
+    t = np.asarray(as_array(t, "t", "(3,)"), float)
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise ValueError(f"t must be a finite (3,) vector; got shape {t.shape}")
+    sigma_px = as_positive(sigma_px, "sigma_px")
+    depth = X @ R[2] + t[2]
+    if not np.all(depth > 0):
+        raise ValueError(f"X rows {np.flatnonzero(~(depth > 0))[:5].tolist()} are not in front of the camera")
+    J = pose_jacobian(np.r_[0.0, 0.0, 0.0, t], X, np.zeros((len(X), 2)), K, R)
+    H = J.T @ J
+    s = np.linalg.svd(H, compute_uv=False)
+    if s[-1] <= 1e-12 * s[0]:
+        raise ValueError("the points do not determine the pose (JᵀJ is singular): collinear points, or too few")
+    return sigma_px ** 2 * np.linalg.inv(H)
