@@ -312,3 +312,28 @@ def check_adaptive_ransac(adaptive_ransac, verbose=True):
         ("degenerate samples: fit returns an empty list", line_case(degenerate=True, seed=3)),
         ("P3P on a synthetic view, 30 % outliers, 0.5 px noise", pnp),
     ], verbose=verbose)
+
+
+def p3p_ransac_inliers(adaptive_ransac, X, x, K, threshold_px, *, seed=1):
+    """The inliers that a student's ``adaptive_ransac`` finds with P3P on the correspondences ``X (N, 3)``, ``x (N,
+    2)`` (calibration ``K``), drawing from a generator of its own (``seed``): for a hidden test on the notebook's
+    data that leaves the notebook's random stream alone.
+
+    Examples
+    --------
+    >>> from labutils.ransac import ransac
+    >>> s = make_scene(40, 2, noise_px=0.0, rng=np.random.default_rng(0))
+    >>> bool(p3p_ransac_inliers(ransac, s.X, s.x_true[0], s.K, 2.0).all())
+    True
+    """
+    y = bearings(x, K)
+
+    def fit(idx):
+        try:
+            return p3p_bearings(X[idx], y[idx])
+        except ValueError:
+            return []
+
+    _, inliers, _ = adaptive_ransac(len(X), 3, fit, lambda m: reprojection_errors(X, x, K, *m), threshold_px,
+                                    rng=np.random.default_rng(seed), confidence=0.9999, max_iter=10000)
+    return np.asarray(inliers, bool)
