@@ -27,6 +27,7 @@ import time
 import numpy as np
 
 from . import _cli
+from ._validation import as_count
 from .bal import read_bal
 from .bundle import bundle_adjust, solve_bal
 from .data import load_scene
@@ -56,6 +57,145 @@ def dino_problem(*, rng, scene=None):
     return dict(scene=scene, R0=R0, t0=t0, X0=X0, camera_indices=ci, point_indices=pi, points_2d=x, tracks=tracks)
 
 
+def subproblem(R0: np.ndarray, t0: np.ndarray, tracks: np.ndarray, K: np.ndarray, n_views: int,
+               max_tracks: int = None) -> tuple:
+    """A smaller bundle-adjustment problem cut from a bigger one, for timing solvers at several sizes.
+
+    Parameters
+    ----------
+    R0 : (V, 3, 3) ndarray
+    t0 : (V, 3) ndarray
+        Starting cameras (e.g. perturbed).
+    tracks : (V, M, 2) ndarray
+        Pixels, NaN where a point is not seen.
+    K : (3, 3) ndarray
+    n_views : int
+        Keep the first ``n_views`` cameras ...
+    max_tracks : int, optional
+        ... and ``max_tracks`` of the tracks seen at least twice among them (evenly spread over their order).
+
+    Returns
+    -------
+    tuple
+        ``(R0, t0, X0, camera_indices, point_indices, points_2d, K)``, the positional arguments of
+        :func:`labutils.bundle.bundle_adjust`, with ``X0`` triangulated (DLT) from the starting cameras.
+
+    >>> from labutils.synthetic import make_scene
+    >>> s = make_scene(30, 4, noise_px=0.5, rng=np.random.default_rng(0))
+    >>> pb = subproblem(s.R, s.t, s.x_meas, s.K, 3, max_tracks=10)
+    >>> pb[2].shape, pb[5].shape
+    ((10, 3), (30, 2))
+    """
+    n_views = as_count(n_views, "n_views", 2)
+    if n_views > len(R0):
+        raise ValueError(f"n_views must be at most the {len(R0)} cameras of R0; got {n_views}")
+    sub = tracks[:n_views]
+    sub = sub[:, np.isfinite(sub[..., 0]).sum(0) >= 2]
+    if max_tracks is not None and sub.shape[1] > max_tracks:            # evenly spread over the tracks
+        keep = np.linspace(0, sub.shape[1] - 1, as_count(max_tracks, "max_tracks")).round().astype(int)
+        sub = sub[:, np.unique(keep)]
+    if sub.shape[1] == 0:
+        raise ValueError(f"no track is seen twice in the first {n_views} views")
+    Ps = np.stack([P_from_KRt(K, R, t) for R, t in zip(R0[:n_views], t0[:n_views])])
+    ci, pi, x = observations(sub)
+    return R0[:n_views], t0[:n_views], triangulate_multiview(Ps, sub), ci, pi, x, K
+
+
+# the solvers the notebook and the command line time, by name: keywords of bundle_adjust
+TIGHT_LSMR = dict(tr_options=dict(atol=1e-10, btol=1e-10))
+SOLVERS = {
+    "LM-Schur": dict(solver="lm-schur"),
+    "scipy, no mask": dict(solver="scipy", scipy_jac="dense"),
+    "scipy, mask": dict(solver="scipy", scipy_jac="sparsity"),
+    "scipy, mask, tight LSMR": dict(solver="scipy", scipy_jac="sparsity", scipy_options=TIGHT_LSMR),
+    "scipy, analytic": dict(solver="scipy", scipy_jac="analytic"),
+}
+
+
+def time_solvers(problem: tuple, names, *, loss: str = "soft_l1", f_scale: float = 2.0, max_iter: int = 500,
+                 progress=None, show_cost: bool = True) -> list:
+    """Run :func:`labutils.bundle.bundle_adjust` with each named solver on one problem, timed (wall clock).
+
+    Parameters
+    ----------
+    problem : tuple
+        The positional arguments of ``bundle_adjust`` (e.g. from :func:`subproblem`).
+    names : sequence of str
+        Keys of :data:`SOLVERS`: ``'LM-Schur'``, ``'scipy, no mask'`` (dense finite differences; small problems
+        only), ``'scipy, mask'`` (finite differences grouped by the sparsity mask, LSMR), ``'scipy, mask, tight
+        LSMR'``, ``'scipy, analytic'``.
+    loss, f_scale, max_iter
+        As in ``bundle_adjust`` (the same for every solver).
+    progress : callable, optional
+        Called with one line of text per run.
+    show_cost : bool
+        Put the final cost in that line (not meaningful for runs cut short after a few iterations).
+
+    Returns
+    -------
+    list of dict
+        One per run: ``name``, ``iterations``, ``seconds``, ``seconds_per_iteration``, ``cost_final``
+        (``0.5·Σr²``), ``loss_cost_final`` (the robust objective), ``n_params`` and ``result`` (the
+        :class:`labutils.bundle.BundleResult`).
+
+    >>> from labutils.synthetic import make_scene
+    >>> s = make_scene(20, 3, noise_px=0.5, rng=np.random.default_rng(0))
+    >>> rows = time_solvers(subproblem(s.R, s.t, s.x_meas, s.K, 3), ["LM-Schur", "scipy, mask"], loss="linear")
+    >>> [r["name"] for r in rows], bool(abs(rows[0]["cost_final"] / rows[1]["cost_final"] - 1) < 1e-3)
+    (['LM-Schur', 'scipy, mask'], True)
+    """
+    unknown = [n for n in names if n not in SOLVERS]
+    if unknown:
+        raise ValueError(f"names must be keys of SOLVERS {list(SOLVERS)}; got {unknown}")
+    n_params = 6 * len(problem[0]) + 3 * len(problem[2])
+    rows = []
+    for name in names:
+        (res, wall, _) = _timed(lambda name=name: bundle_adjust(*problem, loss=loss, f_scale=f_scale,
+                                                                max_iter=max_iter, **SOLVERS[name]))
+        rows.append(dict(name=name, iterations=res.n_iter, seconds=wall, seconds_per_iteration=wall / res.n_iter,
+                         cost_final=res.cost_final, loss_cost_final=res.loss_cost_final, n_params=n_params,
+                         result=res))
+        if progress is not None:
+            progress(f"  {name:24s} {res.n_iter:4d} iterations {wall:8.2f} s  ({1e3 * wall / res.n_iter:7.1f} ms per "
+                     "iteration)" + (f"  cost {res.loss_cost_final:.7g}" if show_cost else ""))
+    return rows
+
+
+def time_per_iteration(R0: np.ndarray, t0: np.ndarray, tracks: np.ndarray, K: np.ndarray, sizes, names, *,
+                       n_iter: int = 3, progress=None) -> list:
+    """Seconds per iteration of each solver on growing subproblems: what the sparsity mask and the Schur
+    complement are worth as the problem grows.
+
+    Each solver runs ``n_iter`` iterations (plain least squares) on :func:`subproblem` of each size; the time of a
+    run divided by its iterations (Jacobian evaluations: scipy counts a rejected step as a residual evaluation
+    only, so it may report fewer) is one point. A dense solver's iteration grows like the cube of the number of
+    parameters, a sparse one's about linearly.
+
+    Parameters
+    ----------
+    R0, t0, tracks, K
+        As in :func:`subproblem`.
+    sizes : sequence of (n_views, max_tracks)
+    names : sequence of str
+        Keys of :data:`SOLVERS`.
+    n_iter : int
+    progress : callable, optional
+
+    Returns
+    -------
+    list of dict
+        One per (size, solver), as :func:`time_solvers` returns, with ``n_views`` and ``n_points``.
+    """
+    rows = []
+    for n_views, max_tracks in sizes:
+        pb = subproblem(R0, t0, tracks, K, n_views, max_tracks)
+        if progress is not None:
+            progress(f"{n_views} views, {len(pb[2])} points ({6 * n_views + 3 * len(pb[2])} parameters):")
+        for row in time_solvers(pb, names, loss="linear", max_iter=n_iter, progress=progress, show_cost=False):
+            rows.append(dict(row, n_views=n_views, n_points=len(pb[2])))
+    return rows
+
+
 def _timed(fn):
     w, c = time.perf_counter(), time.process_time()
     res = fn()
@@ -69,7 +209,6 @@ def _row(res, wall, cpu, **extra):
                 success=res.success, **extra)
 
 
-TIGHT_LSMR = dict(tr_options=dict(atol=1e-10, btol=1e-10))
 SCIPY_VARIANTS = {
     "scipy-mask": dict(scipy_jac="sparsity"),
     "scipy-mask-tight-lsmr": dict(scipy_jac="sparsity", scipy_options=TIGHT_LSMR),

@@ -5,14 +5,19 @@ point blocks are eliminated by the Schur complement (Triggs et al. 2000, Sec. 6.
 reduced camera system is solved by dense Cholesky. Robust losses by iteratively reweighted least squares, then
 the loss's second-order curvature near the optimum (:mod:`labutils.robust`). Called through
 :func:`labutils.bundle.bundle_adjust` (``solver='lm-schur'``), which checks the input and fixes the gauge.
+:func:`schur_step` computes one damped step of the same solver on its own (notebook 04 derives it in cells and
+compares).
 """
 import sys
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 
-from .reprojection import project_observations
+from ._validation import as_positive
+from .reprojection import check_problem, project_observations
 from .robust import CURVATURE_FLOOR, SECOND_ORDER_AFTER, rho
 
 
@@ -108,12 +113,7 @@ def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter,
                 hw = np.sqrt(np.maximum(d1 + 2 * z * d2, CURVATURE_FLOOR * d1) if second_order else d1)
                 r = r * d1 / hw
                 Jc, Jp = Jc * hw[:, :, None], Jp * hw[:, :, None]
-            JcT = np.swapaxes(Jc, 1, 2)
-            U = (st.A_cam @ (JcT @ Jc).reshape(-1, k * k)).reshape(V, k, k)          # camera blocks
-            Vp = (st.A_pt @ (np.swapaxes(Jp, 1, 2) @ Jp).reshape(-1, 9)).reshape(M, 3, 3)   # point blocks
-            W = JcT @ Jp                                                # (n, k, 3) camera-point blocks
-            gc = st.A_cam @ np.einsum("nai,na->ni", Jc, r)          # (V, k)
-            gp = st.A_pt @ np.einsum("nai,na->ni", Jp, r)           # (M, 3)
+            U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, r)
             # frozen parameters: identity rows, zero gradient (their step is exactly 0)
             ic = np.nonzero(frozen_c)
             U[ic[0], ic[1], ic[1]] = 1.0
@@ -127,26 +127,12 @@ def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter,
                 status, success = "gradient is zero to machine precision", True
                 break
             need_jac = False
-        # damped blocks, point inverses, reduced camera system
-        Ua = U.copy()
-        Ua[:, np.arange(k), np.arange(k)] += mu * Dc
-        Va = Vp.copy()
-        Va[:, np.arange(3), np.arange(3)] += mu * Dp
-        Vinv = _inv_sym3(Va)
-        Y = W @ Vinv[pi]                                            # W V⁻¹ per observation, (n, k, 3)
-        S = -_reduced_camera_blocks(st, Y, W)
-        S += _block_diag_dense(Ua)
-        rhs = -(gc - st.A_cam @ np.einsum("nij,nj->ni", Y, gp[pi])).ravel()
         try:
-            dc = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S, lower=True, check_finite=False), rhs,
-                                        check_finite=False).reshape(V, k)
+            dc, dp, _, _ = _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c, frozen_p)
         except np.linalg.LinAlgError:
             mu *= nu
             nu *= 2
             continue
-        dc[frozen_c] = 0.0
-        dp = np.einsum("mij,mj->mi", Vinv, -gp - st.A_pt @ np.einsum("nij,ni->nj", W, dc[ci]))
-        dp[frozen_p] = 0.0
         h_norm = np.sqrt((dc ** 2).sum() + (dp ** 2).sum())
         xtol = 1e-2 * tol                                          # Ceres: 1e-8 with function tolerance 1e-6
         if h_norm <= xtol * (x_norm + xtol):
@@ -182,6 +168,146 @@ def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter,
                 status, success = "damping exceeded 1e32: no further reduction possible", True
                 break
     return dict(cp=cp, X=X, n_iter=n_iter, n_eval=n_eval, success=success, message=status)
+
+
+def _normal_blocks(st, Jc, Jp, r):
+    """The blocks of ``JᵀJ`` and ``Jᵀr`` from per-observation Jacobian blocks ``Jc (n, 2, k)``, ``Jp (n, 2, 3)``.
+
+    Returns ``U (V, k, k)`` (camera blocks), ``Vp (M, 3, 3)`` (point blocks), ``W (n, k, 3)`` (one camera-point
+    block per observation), ``gc (V, k)`` and ``gp (M, 3)`` (the gradient ``Jᵀr``).
+    """
+    n, _, k = Jc.shape
+    JcT = np.swapaxes(Jc, 1, 2)
+    U = (st.A_cam @ (JcT @ Jc).reshape(-1, k * k)).reshape(-1, k, k)            # camera blocks
+    Vp = (st.A_pt @ (np.swapaxes(Jp, 1, 2) @ Jp).reshape(-1, 9)).reshape(-1, 3, 3)   # point blocks
+    W = JcT @ Jp                                                # (n, k, 3) camera-point blocks
+    gc = st.A_cam @ np.einsum("nai,na->ni", Jc, r)              # (V, k)
+    gp = st.A_pt @ np.einsum("nai,na->ni", Jp, r)               # (M, 3)
+    return U, Vp, W, gc, gp
+
+
+def _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c=None, frozen_p=None):
+    """One damped Gauss–Newton step by the Schur complement: ``(dc (V, k), dp (M, 3), S, rhs)``.
+
+    Solves ``(JᵀJ + μ D) δ = -Jᵀr`` with ``D = diag(Dc, Dp)``: the 3×3 point blocks inverted in closed form,
+    the reduced camera system ``S δc = rhs`` by dense Cholesky (raises ``LinAlgError`` when S is not positive
+    definite), then back-substitution ``δp = V⁻¹(-gp - Wᵀ δc)``. Frozen parameters get a zero step.
+    """
+    V, k = gc.shape
+    Ua = U.copy()
+    Ua[:, np.arange(k), np.arange(k)] += mu * Dc
+    Va = Vp.copy()
+    Va[:, np.arange(3), np.arange(3)] += mu * Dp
+    Vinv = _inv_sym3(Va)
+    Y = W @ Vinv[pi]                                            # W V⁻¹ per observation, (n, k, 3)
+    S = -_reduced_camera_blocks(st, Y, W)
+    S += _block_diag_dense(Ua)
+    rhs = -(gc - st.A_cam @ np.einsum("nij,nj->ni", Y, gp[pi])).ravel()
+    dc = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S, lower=True, check_finite=False), rhs,
+                                check_finite=False).reshape(V, k)
+    if frozen_c is not None:
+        dc[frozen_c] = 0.0
+    dp = np.einsum("mij,mj->mi", Vinv, -gp - st.A_pt @ np.einsum("nij,ni->nj", W, dc[ci]))
+    if frozen_p is not None:
+        dp[frozen_p] = 0.0
+    return dc, dp, S, rhs
+
+
+@dataclass
+class SchurStep:
+    """One damped step of LM-Schur, with the blocks it was made of (what :func:`schur_step` returns).
+
+    Attributes
+    ----------
+    U : (V, k, k) ndarray
+        Camera blocks of ``JᵀJ`` (undamped).
+    V : (M, 3, 3) ndarray
+        Point blocks of ``JᵀJ`` (undamped).
+    W : (n_obs, k, 3) ndarray
+        The camera-point blocks ``Jcᵀ Jp``, one per observation (block ``(c, p)`` of ``JᵀJ`` sums those of the
+        observations of point ``p`` by camera ``c``).
+    g_c : (V, k) ndarray
+    g_p : (M, 3) ndarray
+        The gradient ``Jᵀr`` split into its camera and point parts.
+    S : (V k, V k) ndarray
+        The damped reduced camera matrix ``U* - W V*⁻¹ Wᵀ`` (``*``: with ``μ D`` added to the diagonal).
+    rhs : (V k,) ndarray
+        ``-(g_c - W V*⁻¹ g_p)``.
+    delta_c : (V, k) ndarray
+    delta_p : (M, 3) ndarray
+        The step: ``S δc = rhs``, then ``δp = V*⁻¹ (-g_p - Wᵀ δc)``.
+    mu : float
+    """
+
+    U: np.ndarray = field(repr=False)
+    V: np.ndarray = field(repr=False)
+    W: np.ndarray = field(repr=False)
+    g_c: np.ndarray = field(repr=False)
+    g_p: np.ndarray = field(repr=False)
+    S: np.ndarray = field(repr=False)
+    rhs: np.ndarray = field(repr=False)
+    delta_c: np.ndarray = field(repr=False)
+    delta_p: np.ndarray = field(repr=False)
+    mu: float
+
+
+def schur_step(camera_params: ArrayLike, points_3d: ArrayLike, camera_indices: ArrayLike, point_indices: ArrayLike,
+               points_2d: ArrayLike, K: ArrayLike, *, mu: float) -> SchurStep:
+    """One damped Gauss–Newton step of :func:`lm_schur`, by the Schur complement (H&Z Sec. A6.3, Alg. A6.4).
+
+    The step solves ``(JᵀJ + μ D) δ = -Jᵀr`` for the plain squared error, with Marquardt's scaling
+    ``D = diag(JᵀJ)`` (each entry clipped to ``[1e-6, 1e32]``), exactly as an iteration of the solver behind
+    ``bundle_adjust(..., solver='lm-schur')`` does (every parameter free, no gauge: the damping keeps ``S``
+    positive definite). It exists to show, and to test, one step of the solver on its own.
+
+    Parameters
+    ----------
+    camera_params, points_3d, camera_indices, point_indices, points_2d, K
+        As in :func:`labutils.reprojection.reprojection_residuals`.
+    mu : float
+        The damping, > 0.
+
+    Returns
+    -------
+    SchurStep
+        The blocks ``U, V, W``, the gradient, ``S``, the right-hand side and the step ``delta_c (V, k)``,
+        ``delta_p (M, 3)``.
+
+    Raises
+    ------
+    ValueError
+        Bad input (see :func:`labutils.reprojection.reprojection_residuals`), ``mu`` not positive, or a reduced
+        camera matrix that is not positive definite.
+
+    Examples
+    --------
+    The step equals the direct solution of the damped normal equations:
+
+    >>> from labutils.reprojection import reprojection_jacobian, reprojection_residuals
+    >>> cp = np.array([[0., 0, 0, 0, 0, 5], [0, 0.1, 0, -1, 0, 5]]); X = np.random.default_rng(0).normal(size=(6, 3))
+    >>> ci, pi = np.repeat([0, 1], 6), np.tile(np.arange(6), 2); K = np.diag([500., 500, 1])
+    >>> x = np.random.default_rng(1).normal(size=(12, 2))
+    >>> step = schur_step(cp, X, ci, pi, x, K, mu=1e-3)
+    >>> J = reprojection_jacobian(cp, X, ci, pi, K).toarray(); A = J.T @ J
+    >>> g = J.T @ reprojection_residuals(cp, X, ci, pi, x, K)
+    >>> delta = np.linalg.solve(A + 1e-3 * np.diag(np.diag(A)), -g)
+    >>> bool(np.allclose(np.r_[step.delta_c.ravel(), step.delta_p.ravel()], delta, rtol=1e-8, atol=1e-10))
+    True
+    """
+    cp, X, ci, pi, x, Ks = check_problem(camera_params, points_3d, camera_indices, point_indices, points_2d, K)
+    mu = as_positive(mu, "mu")
+    V, M = cp.shape[0], X.shape[0]
+    st = _SchurStructure(ci, pi, V, M)
+    u, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
+    U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, u - x)
+    Dc = np.clip(np.diagonal(U, axis1=1, axis2=2), 1e-6, 1e32)
+    Dp = np.clip(np.diagonal(Vp, axis1=1, axis2=2), 1e-6, 1e32)
+    try:
+        dc, dp, S, rhs = _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"the damped reduced camera matrix is not positive definite at mu = {mu:g} "
+                         "(a camera or point without enough observations?)") from None
+    return SchurStep(U=U, V=Vp, W=W, g_c=gc, g_p=gp, S=S, rhs=rhs, delta_c=dc, delta_p=dp, mu=mu)
 
 
 def _reduced_camera_blocks(st, Y, W):

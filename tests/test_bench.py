@@ -1,0 +1,71 @@
+"""The benchmark helpers notebook 04 uses (subproblem, time_solvers, time_per_iteration) and the command line's
+refusals. Timings are printed by the benchmark, never asserted here."""
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from labutils.bench import SOLVERS, subproblem, time_per_iteration, time_solvers
+from labutils.synthetic import make_scene, perturb_cameras
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def turntable():
+    s = make_scene(80, 6, layout="turntable", noise_px=0.5, rng=np.random.default_rng(2))
+    R0, t0 = perturb_cameras(s.R, s.t, rng=np.random.default_rng(3), rot_deg=0.5, rel_shift=0.01)
+    return s, R0, t0
+
+
+def test_subproblem_keeps_views_and_spread_tracks(turntable):
+    s, R0, t0 = turntable
+    R, t, X, ci, pi, x, K = subproblem(R0, t0, s.x_meas, s.K, 4, max_tracks=20)
+    assert R.shape == (4, 3, 3) and t.shape == (4, 3) and X.shape == (20, 3)
+    assert ci.max() < 4 and pi.max() == 19 and np.bincount(pi).min() >= 2     # every track seen twice
+    assert np.all(np.isfinite(X))
+
+
+def test_subproblem_refuses_bad_sizes(turntable):
+    s, R0, t0 = turntable
+    with pytest.raises(ValueError, match="n_views"):
+        subproblem(R0, t0, s.x_meas, s.K, 7)
+    with pytest.raises(ValueError, match="n_views"):
+        subproblem(R0, t0, s.x_meas, s.K, 1)
+    with pytest.raises(ValueError, match="max_tracks"):
+        subproblem(R0, t0, s.x_meas, s.K, 3, max_tracks=0)
+
+
+def test_time_solvers_rows_and_same_optimum(turntable):
+    s, R0, t0 = turntable
+    rows = time_solvers(subproblem(R0, t0, s.x_meas, s.K, 4), ["LM-Schur", "scipy, analytic"], loss="linear")
+    assert [r["name"] for r in rows] == ["LM-Schur", "scipy, analytic"]
+    for r in rows:
+        assert r["iterations"] >= 1 and r["seconds"] > 0 and r["result"].success
+        assert np.isclose(r["seconds_per_iteration"], r["seconds"] / r["iterations"])
+    assert abs(rows[1]["cost_final"] / rows[0]["cost_final"] - 1) < 1e-4
+
+
+def test_time_solvers_refuses_unknown_names(turntable):
+    s, R0, t0 = turntable
+    with pytest.raises(ValueError, match="SOLVERS"):
+        time_solvers(subproblem(R0, t0, s.x_meas, s.K, 3), ["ceres"])
+    assert {"LM-Schur", "scipy, no mask", "scipy, mask"} <= set(SOLVERS)
+
+
+def test_time_per_iteration_one_row_per_size_and_solver(turntable, capsys):
+    s, R0, t0 = turntable
+    rows = time_per_iteration(R0, t0, s.x_meas, s.K, [(3, 15), (4, 30)], ["scipy, no mask", "LM-Schur"], n_iter=2,
+                              progress=print)
+    assert [(r["n_views"], r["name"]) for r in rows] == [(3, "scipy, no mask"), (3, "LM-Schur"),
+                                                         (4, "scipy, no mask"), (4, "LM-Schur")]
+    assert all(r["n_params"] == 6 * r["n_views"] + 3 * r["n_points"] for r in rows)
+    assert "per iteration" in capsys.readouterr().out
+
+
+def test_command_line_refuses_unknown_arguments():
+    r = subprocess.run([sys.executable, "-m", "labutils.bench", "ba", "--fast"], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 2 and r.stdout == "" and "--fast" in r.stderr

@@ -1,0 +1,195 @@
+"""Notebook 04's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
+import numpy as np
+import pytest
+
+from labutils.exercises.ex04_bundle import check_projection_jacobian, check_schur_step, check_sparsity_mask
+from labutils.geometry import left_jacobian_so3, rotation_from_angle_axis
+from labutils.reprojection import jacobian_sparsity
+
+# --- the reference solutions, as written in the notebook ---------------------------------------------------------
+
+
+def projection_jacobian_reference(camera_params, points_3d, camera_indices, point_indices, K, left=True):
+    w, t = camera_params[camera_indices, :3], camera_params[camera_indices, 3:6]
+    R = rotation_from_angle_axis(w)                                  # (n, 3, 3)
+    RX = np.einsum("nij,nj->ni", R, points_3d[point_indices])
+    P = RX + t                                                       # the points in the cameras
+    z = P[:, 2]
+    dn = np.zeros((len(P), 2, 3))
+    dn[:, 0, 0] = dn[:, 1, 1] = 1 / z
+    dn[:, :, 2] = -P[:, :2] / z[:, None] ** 2
+    du_dP = K[:2, :2] @ dn                                           # (n, 2, 3)
+    skew_RX = np.cross(np.eye(3), RX[:, None, :])                    # [RX]× per observation
+    rot = -du_dP @ skew_RX @ (left_jacobian_so3(w) if left else np.eye(3))
+    return np.concatenate([rot, du_dP], axis=2), du_dP @ R
+
+
+def sparsity_mask_reference(n_cameras, n_points, camera_indices, point_indices):
+    n = len(camera_indices)
+    A = np.zeros((2 * n, 6 * n_cameras + 3 * n_points), bool)
+    for i, (c, p) in enumerate(zip(camera_indices, point_indices)):
+        A[2 * i:2 * i + 2, 6 * c:6 * c + 6] = True
+        A[2 * i:2 * i + 2, 6 * n_cameras + 3 * p:6 * n_cameras + 3 * p + 3] = True
+    return A
+
+
+def schur_step_reference(J, r, n_cam_cols, mu):
+    A, g = J.T @ J, J.T @ r
+    A = A + mu * np.diag(np.diag(A))                                 # Marquardt's damping
+    c = n_cam_cols
+    U, W, V = A[:c, :c], A[:c, c:], A[c:, c:]
+    V_inv = np.zeros_like(V)
+    for j in range(0, V.shape[0], 3):                                # V is block diagonal: 3x3 blocks
+        V_inv[j:j + 3, j:j + 3] = np.linalg.inv(V[j:j + 3, j:j + 3])
+    S = U - W @ V_inv @ W.T
+    delta_c = np.linalg.solve(S, -(g[:c] - W @ V_inv @ g[c:]))
+    delta_p = -V_inv @ (g[c:] + W.T @ delta_c)
+    return delta_c, delta_p
+
+
+@pytest.mark.parametrize("check, solution", [(check_projection_jacobian, projection_jacobian_reference),
+                                             (check_sparsity_mask, sparsity_mask_reference),
+                                             (check_sparsity_mask, jacobian_sparsity),
+                                             (check_schur_step, schur_step_reference)])
+def test_reference_solutions_pass(check, solution):
+    report = check(solution, verbose=False)
+    assert report.passed, report.text()
+
+
+def _hints(report):
+    assert not report.passed
+    return " ".join(report.hints)
+
+
+def test_stub_is_reported_as_not_written(capsys):
+    def stub(*args):
+        raise NotImplementedError
+    for check in (check_projection_jacobian, check_sparsity_mask, check_schur_step):
+        report = check(stub)
+        assert not report.written and "not written yet" in capsys.readouterr().out
+
+
+# --- exercise 1: typical mistakes ---------------------------------------------------------------------------------
+
+def test_jacobian_without_left_jacobian_fails_only_away_from_zero():
+    report = check_projection_jacobian(lambda *a: projection_jacobian_reference(*a, left=False), verbose=False)
+    assert [c.passed for c in report.cases] == [False, True, False]
+    assert "missing J_l(ω)" in _hints(report)
+
+
+def test_jacobian_right_instead_of_left():
+    def wrong(cp, X, ci, pi, K):
+        Jc, Jp = projection_jacobian_reference(cp, X, ci, pi, K, left=False)
+        Jc[:, :, :3] = Jc[:, :, :3] @ np.swapaxes(left_jacobian_so3(cp[ci, :3]), 1, 2)
+        return Jc, Jp
+    assert "right Jacobian" in _hints(check_projection_jacobian(wrong, verbose=False))
+
+
+def test_jacobian_rotation_sign():
+    def wrong(*a):
+        Jc, Jp = projection_jacobian_reference(*a)
+        Jc[:, :, :3] *= -1
+        return Jc, Jp
+    assert "wrong sign" in _hints(check_projection_jacobian(wrong, verbose=False))
+
+
+def test_jacobian_point_block_without_R():
+    def wrong(cp, X, ci, pi, K):
+        Jc, _ = projection_jacobian_reference(cp, X, ci, pi, K)
+        return Jc, Jc[:, :, 3:].copy()
+    assert "∂P/∂X = R" in _hints(check_projection_jacobian(wrong, verbose=False))
+
+
+def test_jacobian_skew_dropped():
+    def wrong(cp, X, ci, pi, K):
+        return projection_jacobian_reference(cp, X, ci, pi, np.diag(np.diag(K)))
+    report = check_projection_jacobian(wrong, verbose=False)
+    assert [c.passed for c in report.cases] == [True, True, False] and "skew" in _hints(report)
+
+
+def test_jacobian_unrotated_point():
+    def wrong(cp, X, ci, pi, K):
+        Jc, Jp = projection_jacobian_reference(cp, X, ci, pi, K)
+        du = Jc[:, :, 3:]
+        Jc[:, :, :3] = -du @ np.cross(np.eye(3), X[pi][:, None, :]) @ left_jacobian_so3(cp[ci, :3])
+        return Jc, Jp
+    assert "[X]×" in _hints(check_projection_jacobian(wrong, verbose=False))
+
+
+# --- exercise 2: typical mistakes ---------------------------------------------------------------------------------
+
+def _mask_variant(change):
+    def f(V, M, ci, pi):
+        return change(sparsity_mask_reference(V, M, ci, pi), V, M)
+    return f
+
+
+def test_mask_without_point_block():
+    def change(A, V, M):
+        A[:, 6 * V:] = False
+        return A
+    assert "point columns are empty" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+
+
+def test_mask_points_first():
+    def change(A, V, M):
+        return np.hstack([A[:, 6 * V:], A[:, :6 * V]])
+    assert "cameras come first" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+
+
+def test_mask_one_row_per_observation():
+    def change(A, V, M):
+        return A[0::2]
+    assert "two residuals" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+
+
+def test_mask_only_x_rows():
+    def change(A, V, M):
+        A[1::2] = False
+        return A
+    assert "both rows" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+
+
+def test_mask_shape_from_the_indices():
+    def wrong(V, M, ci, pi):
+        return sparsity_mask_reference(int(ci.max()) + 1, int(pi.max()) + 1, ci, pi)
+    report = check_sparsity_mask(wrong, verbose=False)
+    assert [c.passed for c in report.cases] == [True, True, False] and "n_cameras and n_points" in _hints(report)
+
+
+def test_mask_too_full():
+    def change(A, V, M):
+        A[:, :6 * V] = True                                          # every camera for every row
+        return A
+    assert "too many" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+
+
+# --- exercise 3: typical mistakes ---------------------------------------------------------------------------------
+
+def _schur_variant(damping="marquardt", rhs_sign=-1, S_sign=-1, back_sign=1, diagonal_V=False):
+    def f(J, r, c, mu):
+        A, g = J.T @ J, J.T @ r
+        if damping == "marquardt":
+            A = A + mu * np.diag(np.diag(A))
+        elif damping == "levenberg":
+            A = A + mu * np.eye(len(A))
+        elif damping == "U only":
+            A[:c, :c] += mu * np.diag(np.diag(A[:c, :c]))
+        U, W, V = A[:c, :c], A[:c, c:], A[c:, c:]
+        V_inv = np.diag(1 / np.diag(V)) if diagonal_V else np.linalg.inv(V)
+        dc = np.linalg.solve(U + S_sign * W @ V_inv @ W.T, rhs_sign * (g[:c] - W @ V_inv @ g[c:]))
+        return dc, -V_inv @ (g[c:] + back_sign * W.T @ dc)
+    return f
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    (dict(damping="levenberg"), "Levenberg's μI"),
+    (dict(damping="U only"), "only U is damped"),
+    (dict(damping="none"), "no damping"),
+    (dict(rhs_sign=1), "wrong sign"),
+    (dict(S_sign=1), "U - W V⁻¹ Wᵀ"),
+    (dict(back_sign=-1), "back-substitution"),
+    (dict(diagonal_V=True), "3×3 blocks"),
+])
+def test_schur_mistakes(kwargs, words):
+    assert words in _hints(check_schur_step(_schur_variant(**kwargs), verbose=False))
