@@ -470,7 +470,7 @@ def test_write_failure_leaves_nothing(tmp_path, monkeypatch):
     def full(fd):
         raise OSError(28, "No space left on device")
     monkeypatch.setattr(os, "fsync", full)
-    with pytest.raises(CommandError, match="a.json: cannot write \\(No space left on device\\)"):
+    with pytest.raises(OSError, match="a.json: cannot write \\(No space left on device\\)"):
         write_atomically({str(tmp_path / "a.json"): "{}", str(tmp_path / "K.txt"): "1 0 0\n"})
     assert list(tmp_path.iterdir()) == []
 
