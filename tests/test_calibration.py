@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from labutils._cli import CommandError
 from labutils._cli import write_all_atomically as write_atomically
 from labutils.calibrate import main
 from labutils.calibration import CalibrationProblem, _intrinsic_map, calibrate_camera, calibrate_stereo, view_influence
