@@ -14,82 +14,13 @@ from ._validation import as_count, as_fundamental, as_positive
 from .epipolar import (
     canonical_sign,
     check_pair,
-    design_matrix,
+    epipole_search,
     fundamental_8point,
     hartley_normalisation,
     transform_points,
 )
 from .geometry import skew
 from .triangulation import triangulate_optimal
-
-
-def epipole_search(x1: ArrayLike, x2: ArrayLike, n_dirs: int = 400, n_best: int = 1,
-                   min_angle_deg: float = 8.0) -> list:
-    """Global search for starting points of the gold standard: F with a given epipole, over a grid of epipoles.
-
-    For a fixed right epipole e, the F with ``F e = 0`` that minimises the algebraic error is linear
-    (H&Z Sec. 11.3: ``F = G Bᵀ`` with B an orthonormal basis of e⊥, and G the smallest eigenvector of a
-    6×6 matrix). Its Sampson error is evaluated for ``n_dirs`` epipoles spread evenly over the projective
-    plane (a Fibonacci hemisphere of directions in Hartley-normalised coordinates, so epipoles at
-    infinity are included); the ``n_best`` lowest, at least ``min_angle_deg`` apart, are returned. When the
-    epipole lies inside the image (forward motion) the 8-point often lands in the wrong basin of the ML
-    cost; these starts do not.
-
-    Parameters
-    ----------
-    x1, x2 : (N, 2) array_like
-        N >= 8.
-    n_dirs : int
-        Epipole directions tried.
-    n_best : int
-        Starts returned.
-    min_angle_deg : float
-        Smallest angle between the epipole directions of two returned starts.
-
-    Returns
-    -------
-    list of (3, 3) ndarray
-        Rank-2 F, unit norm, best (lowest total squared Sampson error) first.
-
-    Examples
-    --------
-    >>> from labutils.synthetic import make_scene
-    >>> s = make_scene(30, 2, noise_px=0.0, layout="forward", rng=np.random.default_rng(0))
-    >>> x1, x2, _ = s.pair(0, 1, which="true")
-    >>> len(epipole_search(x1, x2, n_best=2)), epipole_search(x1, x2)[0].shape
-    (2, (3, 3))
-    """
-    x1, x2 = check_pair(x1, x2, 8)
-    T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
-    A = design_matrix(transform_points(T1, x1), transform_points(T2, x2))
-    AtA = A.T @ A
-    i = np.arange(n_dirs) + 0.5
-    z = i / n_dirs
-    phi = np.pi * (1 + np.sqrt(5)) * i
-    E = np.column_stack([np.sqrt(1 - z ** 2) * np.cos(phi), np.sqrt(1 - z ** 2) * np.sin(phi), z])
-    helper = np.where(np.abs(E[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    b1 = np.cross(E, helper)
-    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
-    B = np.stack([b1, np.cross(E, b1)], axis=2)                  # (m, 3, 2), orthonormal basis of e⊥
-    C = np.zeros((n_dirs, 9, 6))                                 # vec(G Bᵀ) = C vec(G)
-    for r in range(3):
-        C[:, 3 * r:3 * r + 3, 2 * r:2 * r + 2] = B
-    _, vecs = np.linalg.eigh(C.transpose(0, 2, 1) @ AtA @ C)
-    Fn = (C @ vecs[:, :, :1]).reshape(n_dirs, 3, 3)
-    Fp = T2.T @ Fn @ T1                                           # back to pixels
-    x1_h, x2_h = np.hstack([x1, np.ones((len(x1), 1))]), np.hstack([x2, np.ones((len(x2), 1))])
-    Fx1 = Fp @ x1_h.T                                             # (m, 3, N)
-    Ftx2 = Fp.transpose(0, 2, 1) @ x2_h.T
-    num = (x2_h.T[None] * Fx1).sum(1) ** 2
-    den = Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2
-    cost = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf).sum(1)
-    chosen = []
-    for m in np.argsort(cost):
-        if all(abs(E[m] @ E[c]) < np.cos(np.radians(min_angle_deg)) for c in chosen):
-            chosen.append(m)
-        if len(chosen) == n_best:
-            break
-    return [canonical_sign(Fp[m]) for m in chosen]
 
 
 class GoldStandardProblem:

@@ -362,6 +362,68 @@ def _camera_matrices(K, R, t, views):
     return np.einsum("vij,vjk->vik", K[views], np.concatenate([R[views], t[views, :, None]], axis=2))
 
 
+def _refine_points(Ps, xs, use, X, n_iter=3):
+    """Each point moved to (near) its maximum-likelihood position in the views of ``use`` (H&Z Sec. 12.3, A6.2).
+
+    ``n_iter`` Levenberg–Marquardt steps on each point's reprojection error, all points at once (3×3 normal
+    equations per point); from the DLT, three reach the optimum to 1e-6 px on the dinosaur. The DLT
+    minimises an algebraic error whose weights depend on the world frame: from cameras that differ only
+    by a similarity it gives reprojection errors that differ by pixels, so decisions taken on them
+    (inlier or not) would depend on the gauge. The reprojection error does not.
+
+    Parameters
+    ----------
+    Ps : (V, 3, 4) ndarray
+        Camera matrices, scaled so that the third coordinate of ``P X_h`` is the depth's sign.
+    xs : (V, N, 2) ndarray
+    use : (V, N) bool ndarray
+        The observations each point is fitted to.
+    X : (N, 3) ndarray
+        Starting points (NaN rows, and points behind a camera of ``use``, are left as they are).
+
+    Returns
+    -------
+    X : (N, 3) ndarray
+        A step is kept only if it lowers the point's error and keeps it in front of its cameras.
+    """
+    X = np.array(X, float)
+    cols = np.flatnonzero(np.all(np.isfinite(X), axis=1) & (use.sum(0) >= 2))
+    if cols.size == 0:
+        return X
+    cam, j = np.nonzero(use[:, cols])
+    N = cols.size
+    P, x = Ps[cam], xs[cam, cols[j]]
+
+    def evaluate(Xc):
+        q = np.einsum("nij,nj->ni", P[:, :, :3], Xc[j]) + P[:, :, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = q[:, :2] / q[:, 2:]
+        r = u - x
+        cost = np.bincount(j, (r ** 2).sum(1), N)
+        cost[(np.bincount(j, ~(q[:, 2] > 0), N) > 0) | ~np.isfinite(cost)] = np.inf
+        return r, u, q, cost
+
+    Xc = X[cols]
+    r, u, q, cost = evaluate(Xc)
+    lam = np.full(N, 1e-3)
+    for _ in range(n_iter):
+        J = (P[:, :2, :3] - u[:, :, None] * P[:, 2:3, :3]) / q[:, 2, None, None]          # (n, 2, 3)
+        JtJ = np.stack([np.bincount(j, np.einsum("nk,nk->n", J[:, :, a], J[:, :, b]), N)
+                        for a in range(3) for b in range(3)], axis=1).reshape(N, 3, 3)
+        g = np.stack([np.bincount(j, np.einsum("nk,nk->n", J[:, :, a], r), N) for a in range(3)], axis=1)
+        d = np.einsum("nii->ni", JtJ)
+        A = JtJ + (lam[:, None] * d + 1e-12 * d.sum(1, keepdims=True))[:, :, None] * np.eye(3)
+        ok = np.isfinite(cost) & np.all(np.isfinite(A), axis=(1, 2)) & (np.abs(np.linalg.det(A)) > 0)
+        step = np.zeros((N, 3))
+        step[ok] = np.linalg.solve(A[ok], -g[ok][:, :, None])[:, :, 0]
+        better = ok & (evaluate(Xc + step)[3] < cost)
+        Xc = np.where(better[:, None], Xc + step, Xc)
+        lam = np.where(better, lam / 10, lam * 10)
+        r, u, q, cost = evaluate(Xc)
+    X[cols] = Xc
+    return X
+
+
 def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, views: ArrayLike,
                        mask: ArrayLike, *, threshold_px: float, min_angle_deg: float) -> tuple:
     """Robust triangulation of tracks from registered views (H&Z Sec. 12.2; the idea of COLMAP's RANSAC
@@ -371,11 +433,15 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     by how many of the track's observations then reproject within ``threshold_px`` in front of the camera
     (the consensus). The observations on which all the largest consensus sets agree are triangulated by
     multi-view DLT and the consensus taken again (twice); a track whose largest consensus sets share fewer
-    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected. Then,
-    while some kept observation reprojects
-    too far, the worst one is dropped and the track triangulated again. A point is accepted when at least
-    two observations remain and its triangulation angle is at least ``min_angle_deg``. Trying all pairs
-    makes the result depend on the cameras only, not on the order in which views were added.
+    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected.
+    Then, while some kept observation reprojects too far, the worst one is dropped and the track
+    triangulated again. A point is accepted when at least two observations remain and its triangulation
+    angle is at least ``min_angle_deg``. Trying all pairs makes the result depend on the cameras only, not
+    on the order in which views were added; every DLT point is moved to its maximum-likelihood position
+    (:func:`_refine_points`) before it is judged, so the result does not depend on the world frame either
+    (the DLT's algebraic error does: on the dinosaur, track 3255 triangulated from the true cameras in the
+    world frame reprojects at most 3.1 px from its observations, from the same cameras in the frame of
+    view 17 4.8 px, beyond a 4 px threshold).
 
     Parameters
     ----------
@@ -494,7 +560,8 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     # 2. refit on the consensus set and take the consensus again
     for _ in range(2):
         todo = np.flatnonzero(cons.sum(0) >= 2)
-        X[todo] = triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan))
+        X[todo] = _refine_points(Ps, xs[:, todo], cons[:, todo],
+                                 triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan)))
         cam, pt = np.nonzero(use[:, todo])
         cons[:, todo] = False
         e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
@@ -503,7 +570,8 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     # 3. drop the worst observation while one reprojects too far
     todo = np.flatnonzero(use.sum(0) >= 2)
     while todo.size:
-        X[todo] = triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan))
+        X[todo] = _refine_points(Ps, xs[:, todo], use[:, todo],
+                                 triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan)))
         cam, pt = np.nonzero(use[:, todo])
         err = np.full((V, todo.size), -1.0)
         err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])

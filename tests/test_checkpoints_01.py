@@ -70,12 +70,12 @@ SMALL = dict(BOUND_DOF=400, STUDY_NS=(50, 100))         # 10 and 5 trials: the b
 
 def _returns_its_start(x1, x2, F0=None, **kwargs):
     """A gold standard whose optimisation does nothing: it returns the 8-point start."""
-    return SimpleNamespace(F=fundamental_8point(x1, x2, h_ratio=None) if F0 is None else F0)
+    return SimpleNamespace(F=fundamental_8point(x1, x2, degeneracy=None) if F0 is None else F0)
 
 
 def _plain_8point(x1, x2, F0=None, **kwargs):
     """The plain 8-point used as the gold standard (ignoring the start it is given)."""
-    return SimpleNamespace(F=fundamental_8point(x1, x2, h_ratio=None))
+    return SimpleNamespace(F=fundamental_8point(x1, x2, degeneracy=None))
 
 
 def test_bound_checkpoint_passes(setup):

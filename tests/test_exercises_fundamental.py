@@ -45,7 +45,7 @@ def sampson_reference(F, x1, x2):
     (check_normalisation_matrix, hartley_normalisation),
     (check_eight_point, eight_point_reference),
     (check_eight_point, lambda x1, x2: eight_point_reference(x1, x2, normalise=normalisation_reference)),
-    (check_eight_point, lambda x1, x2: fundamental_8point(x1, x2, h_ratio=None)),
+    (check_eight_point, lambda x1, x2: fundamental_8point(x1, x2, degeneracy=None)),
     (check_sampson, sampson_reference),
     (check_sampson, sampson_distance),
 ])

@@ -157,7 +157,7 @@ def _eight_point_variants(x1, x2):
     T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
     Vt = np.linalg.svd(design_matrix(transform_points(T1, x1), transform_points(T2, x2)))[2]
     F_hat = Vt[-1].reshape(3, 3)
-    ref = fundamental_8point(x1, x2, h_ratio=None)
+    ref = fundamental_8point(x1, x2, degeneracy=None)
     inv1, inv2 = np.linalg.inv(T1), np.linalg.inv(T2)
     v1, v2 = _normalisation_variants(x1), _normalisation_variants(x2)
     return [
@@ -199,7 +199,7 @@ def _diagnose(F, x1, x2):
     if s[2] > 1e-8 * s[0]:
         return (f"your F has rank 3 (singular values {np.round(s / s[0], 6).tolist()} after scaling): enforce rank 2 "
                 "after the SVD — set the smallest singular value of F̂ to zero and rebuild it")
-    ref = fundamental_8point(x1, x2, h_ratio=None)
+    ref = fundamental_8point(x1, x2, degeneracy=None)
     if up_to_sign_scale(F, ref) < 1e-6:
         return None
     for wrong, hint in _eight_point_variants(x1, x2):
@@ -219,7 +219,7 @@ def check_eight_point(eight_point, verbose=True):
 
     Examples
     --------
-    >>> check_eight_point(lambda x1, x2: fundamental_8point(x1, x2, h_ratio=None), verbose=False).passed
+    >>> check_eight_point(lambda x1, x2: fundamental_8point(x1, x2, degeneracy=None), verbose=False).passed
     True
     """
     def exact(f):
@@ -330,12 +330,12 @@ def check_sampson(sampson, verbose=True):
 
     def noisy(f):
         x1, x2 = _pair(4, 1.0)
-        F = fundamental_8point(x1, x2, h_ratio=None)
+        F = fundamental_8point(x1, x2, degeneracy=None)
         return _diagnose_sampson(f(F.copy(), x1.copy(), x2.copy()), F, x1, x2)
 
     def scaled(f):
         x1, x2 = _pair(5, 1.0)
-        F = fundamental_8point(x1, x2, h_ratio=None)
+        F = fundamental_8point(x1, x2, degeneracy=None)
         d = np.asarray(f(-1000.0 * F, x1.copy(), x2.copy()), float)
         return _diagnose_sampson(d, -1000.0 * F, x1, x2)
 
