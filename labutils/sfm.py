@@ -320,6 +320,67 @@ def _camera_matrices(K, R, t, views):
     return np.einsum("vij,vjk->vik", K[views], np.concatenate([R[views], t[views, :, None]], axis=2))
 
 
+def _refine_points(Ps, xs, use, X, n_iter=5):
+    """Each point moved to (near) its maximum-likelihood position in the views of ``use`` (H&Z Sec. 12.2, A6.2).
+
+    A few Levenberg–Marquardt steps on each point's reprojection error, all points at once (3×3 normal
+    equations per point). The DLT minimises an algebraic error whose weights depend on the world frame:
+    from cameras that differ only by a similarity it gives reprojection errors that differ by pixels, so
+    decisions taken on them (inlier or not) would depend on the gauge. The reprojection error does not.
+
+    Parameters
+    ----------
+    Ps : (V, 3, 4) ndarray
+        Camera matrices, scaled so that the third coordinate of ``P X_h`` is the depth's sign.
+    xs : (V, N, 2) ndarray
+    use : (V, N) bool ndarray
+        The observations each point is fitted to.
+    X : (N, 3) ndarray
+        Starting points (NaN rows, and points behind a camera of ``use``, are left as they are).
+
+    Returns
+    -------
+    X : (N, 3) ndarray
+        A step is kept only if it lowers the point's error and keeps it in front of its cameras.
+    """
+    X = np.array(X, float)
+    cols = np.flatnonzero(np.all(np.isfinite(X), axis=1) & (use.sum(0) >= 2))
+    if cols.size == 0:
+        return X
+    cam, j = np.nonzero(use[:, cols])
+    N = cols.size
+    P, x = Ps[cam], xs[cam, cols[j]]
+
+    def evaluate(Xc):
+        q = np.einsum("nij,nj->ni", P[:, :, :3], Xc[j]) + P[:, :, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = q[:, :2] / q[:, 2:]
+        r = u - x
+        cost = np.bincount(j, (r ** 2).sum(1), N)
+        cost[(np.bincount(j, ~(q[:, 2] > 0), N) > 0) | ~np.isfinite(cost)] = np.inf
+        return r, u, q, cost
+
+    Xc = X[cols]
+    r, u, q, cost = evaluate(Xc)
+    lam = np.full(N, 1e-3)
+    for _ in range(n_iter):
+        J = (P[:, :2, :3] - u[:, :, None] * P[:, 2:3, :3]) / q[:, 2, None, None]          # (n, 2, 3)
+        JtJ = np.stack([np.bincount(j, np.einsum("nk,nk->n", J[:, :, a], J[:, :, b]), N)
+                        for a in range(3) for b in range(3)], axis=1).reshape(N, 3, 3)
+        g = np.stack([np.bincount(j, np.einsum("nk,nk->n", J[:, :, a], r), N) for a in range(3)], axis=1)
+        d = np.einsum("nii->ni", JtJ)
+        A = JtJ + (lam[:, None] * d + 1e-12 * d.sum(1, keepdims=True))[:, :, None] * np.eye(3)
+        ok = np.isfinite(cost) & np.all(np.isfinite(A), axis=(1, 2)) & (np.abs(np.linalg.det(A)) > 0)
+        step = np.zeros((N, 3))
+        step[ok] = np.linalg.solve(A[ok], -g[ok][:, :, None])[:, :, 0]
+        better = ok & (evaluate(Xc + step)[3] < cost)
+        Xc = np.where(better[:, None], Xc + step, Xc)
+        lam = np.where(better, lam / 10, lam * 10)
+        r, u, q, cost = evaluate(Xc)
+    X[cols] = Xc
+    return X
+
+
 def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_deg):
     """Robust triangulation of tracks from registered views (H&Z Sec. 12.2; the idea of COLMAP's RANSAC
     triangulation, with every pair of views tried).
@@ -328,10 +389,15 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     by how many of the track's observations then reproject within ``max_error_px`` in front of the camera
     (the consensus). The observations on which all the largest consensus sets agree are triangulated by
     multi-view DLT and the consensus taken again (twice); a track whose largest consensus sets share fewer
-    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected. Then, while some kept observation reprojects
-    too far, the worst one is dropped and the track triangulated again. A point is accepted when at least
-    two observations remain and its triangulation angle is at least ``min_angle_deg``. Trying all pairs
-    makes the result depend on the cameras only, not on the order in which views were added.
+    than two observations is ambiguous (which observation is the outlier cannot be told) and is rejected.
+    Then, while some kept observation reprojects too far, the worst one is dropped and the track
+    triangulated again. A point is accepted when at least two observations remain and its triangulation
+    angle is at least ``min_angle_deg``. Trying all pairs makes the result depend on the cameras only, not
+    on the order in which views were added; every DLT point is moved to its maximum-likelihood position
+    (:func:`_refine_points`) before it is judged, so the result does not depend on the world frame either
+    (the DLT's algebraic error does: on the dinosaur, track 3255 triangulated from the true cameras in the
+    world frame reprojects at most 3.1 px from its observations, from the same cameras in the frame of
+    view 17 4.8 px, beyond a 4 px threshold).
 
     Parameters
     ----------
@@ -432,7 +498,8 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     # 2. refit on the consensus set and take the consensus again
     for _ in range(2):
         todo = np.flatnonzero(cons.sum(0) >= 2)
-        X[todo] = triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan))
+        X[todo] = _refine_points(Ps, xs[:, todo], cons[:, todo],
+                                 triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan)))
         cam, pt = np.nonzero(use[:, todo])
         cons[:, todo] = False
         e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
@@ -441,7 +508,8 @@ def triangulate_tracks(tracks, K, R, t, views, mask, *, max_error_px, min_angle_
     # 3. drop the worst observation while one reprojects too far
     todo = np.flatnonzero(use.sum(0) >= 2)
     while todo.size:
-        X[todo] = triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan))
+        X[todo] = _refine_points(Ps, xs[:, todo], use[:, todo],
+                                 triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan)))
         cam, pt = np.nonzero(use[:, todo])
         err = np.full((V, todo.size), -1.0)
         err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
@@ -716,36 +784,59 @@ def _triangulate_new(st, candidates, threshold_px, min_angle_deg):
     return int(ok.sum())
 
 
-def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_iter, note, timings, rounds=3,
-                      tol=1e-6):
-    """Triangulate every track afresh with the current cameras, then global BA and outlier removal in turn.
+def _final_refinement(st, *, threshold_px, min_angle_deg, loss, f_scale, max_iter, note, timings, rounds=5,
+                      tol=1e-8, l2_start=True):
+    """Inlier set and cameras that agree: triangulate every track afresh from the cameras, BA, and again.
 
-    Removal (every observation of a triangulated point judged afresh against ``threshold_px``) and BA
-    alternate until the inlier set no longer changes, at most ``rounds`` times after the first BA. The BAs
-    stop at a relative cost change of ``tol``: the robust (IRLS) solver creeps on for tens of iterations
-    more, moving the cameras by far less than the choice of a few observations at the threshold does.
+    Each round triangulates every track afresh from the current cameras (:func:`triangulate_tracks`: the
+    inlier set is a function of the cameras alone, whatever the earlier decisions were), then runs a global
+    BA on that set: least squares first (with ``l2_start``), then the robust loss from there. It stops when
+    a round gives back the inlier set the last BA used (a fixed point: these cameras are the optimum of
+    this set, and this set is what these cameras accept), or after ``rounds`` BAs (then the last BA's
+    set and result are kept).
+
+    Why each piece (measured on three-view subsets of the dinosaur's tracks and on forward-moving
+    corridors, against :func:`bundle_from_cameras`, which runs this same function from the true cameras):
+
+    - judging only the points kept so far (readmitting their observations) let the start decide: a track
+      dropped once (too far from unconverged cameras) never came back, one kept once stayed though a fresh
+      triangulation calls it ambiguous; 33 observations of 790 on views (15, 17, 19) made 72 % more
+      rotation error;
+    - the robust cost has several minima: on views (0, 3, 6) the same inlier set gave 16.98 px² (rotation
+      error 1.02°) from the pipeline's cameras and 16.86 px² (1.00°) from the truth; least squares on the
+      inlier set has one minimum here, and the robust BA started from it reaches the lower one from both;
+    - ``tol``: a relative cost change of 1e-6 stopped the BA up to 27 % (rotation error) short of the
+      optimum on these weakly constrained problems; 1e-8 reaches it (within 0.4 %).
     """
     t0 = time.perf_counter()
     views = np.flatnonzero(st.reg)
-    st.rejected[:] = False
-    st.X[:] = np.nan                    # every track afresh: the result depends on the cameras only
     cand = np.flatnonzero(st.seen[views].sum(0) >= 2)
-    n_new = _triangulate_new(st, cand, threshold_px, min_angle_deg)
-    n_bad, n_drop = _filter(st, threshold_px, min_angle_deg, readmit=False)
+
+    def triangulate_afresh():
+        st.rejected[:] = False
+        st.X[:] = np.nan                # every track afresh: the result depends on the cameras only
+        n_new = _triangulate_new(st, cand, threshold_px, min_angle_deg)
+        return (n_new,) + _filter(st, threshold_px, min_angle_deg, readmit=False)
+
+    n_new, n_bad, n_drop = triangulate_afresh()
     timings["final_triangulation"] = time.perf_counter() - t0
     note(f"final: {n_new} tracks triangulated, {n_bad} observations rejected, {n_drop} points dropped")
     t0 = time.perf_counter()
-    res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
-    note(f"final BA 1: {_cost_text(res)}")
-    for k in range(2, rounds + 2):
-        before = st.used()
-        n_bad, n_drop = _filter(st, threshold_px, min_angle_deg, readmit=True)
-        if np.array_equal(before, st.used()):
-            note(f"final: the inlier set is stable ({n_bad} observations beyond {threshold_px:g} px left out)")
+    for k in range(1, rounds + 1):
+        pts = np.flatnonzero(st.triangulated)
+        if l2_start and loss != "linear":
+            _bundle(st, views, pts, [], loss="linear", f_scale=f_scale, max_iter=max_iter, tol=tol)
+        res = _bundle(st, views, pts, [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
+        note(f"final BA {k}: {_cost_text(res)}")
+        before, X_ba, rejected_ba = st.used(), st.X.copy(), st.rejected.copy()
+        n_new, n_bad, n_drop = triangulate_afresh()
+        changed = int((before != st.used()).sum())
+        if changed == 0 or k == rounds:
+            st.X[:], st.rejected[:] = X_ba, rejected_ba     # keep the BA's points and the set it used
+            note("final: triangulated afresh, the inlier set is the same" if changed == 0 else
+                 f"final: {changed} observations would still change after {rounds} rounds; kept the last BA")
             break
-        res = _bundle(st, views, np.flatnonzero(st.triangulated), [], loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
-        note(f"final BA {k}: {n_bad} observations beyond {threshold_px:g} px left out, {n_drop} points dropped; "
-             f"{_cost_text(res)}")
+        note(f"final: triangulated afresh, {changed} observations changed ({n_new} tracks)")
     timings["final_ba"] = time.perf_counter() - t0
 
 
