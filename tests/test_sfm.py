@@ -21,6 +21,46 @@ def turntable(noise_px=0.0, outlier_ratio=0.0, seed=0, n_points=300, n_views=24)
                       rng=np.random.default_rng(seed))
 
 
+def corridor(rng, n_views=11, n_points=150, noise_px=1.0, outlier_ratio=0.05, step=0.6, f=600.0, size=512):
+    """A camera moving forward down a corridor (2 × 2, points on the walls, floor and ceiling up to 14 ahead).
+
+    Centres ``(N(0, 0.05), N(0, 0.05), step · i)``, each camera turned by about 1.5° about a random axis;
+    a point is seen where it projects into the ``size × size`` image at a depth above 0.5 (tracks of ~9
+    views). Returns tracks (noise, then ``outlier_ratio`` of the observations replaced by uniform pixels),
+    K, R, t.
+    """
+    K = np.array([[f, 0, size / 2], [0, f, size / 2], [0, 0, 1.0]])
+    wall, z, u = rng.integers(0, 4, n_points), rng.uniform(1.0, 14.0, n_points), rng.uniform(-1, 1, n_points)
+    X = np.column_stack([np.where(wall < 2, 2 * (wall % 2) - 1.0, u), np.where(wall < 2, u, 1 - 2.0 * (wall % 2)), z])
+    C = np.column_stack([rng.normal(0, 0.05, n_views), rng.normal(0, 0.05, n_views), step * np.arange(n_views)])
+    R = np.stack([rotation_from_angle_axis(rng.normal(0, np.radians(1.5), 3)) for _ in range(n_views)])
+    t = -np.einsum("vij,vj->vi", R, C)
+    x = np.stack([project(P_from_KRt(K, R[v], t[v]), X) for v in range(n_views)])
+    depth = np.einsum("vj,nj->vn", R[:, 2], X) + t[:, 2:3]
+    seen = (depth > 0.5) & (x >= 0).all(-1) & (x < size).all(-1)
+    x, seen = x[:, seen.sum(0) >= 2], seen[:, seen.sum(0) >= 2]
+    tracks = np.where(seen[..., None], x + rng.normal(0, noise_px, x.shape), np.nan)
+    vi, pi = np.nonzero(seen)
+    out = rng.random(vi.size) < outlier_ratio
+    tracks[vi[out], pi[out]] = rng.uniform(0, size, (out.sum(), 2))
+    return tracks, K, R, t
+
+
+def assert_same_optimum(tracks, K, R, t):
+    """incremental_sfm reaches what BA from the true cameras reaches (bundle_from_cameras, the same final stage).
+
+    Mean rotation error within 10 % of the bar's, and the cameras of the two within 1 % of that error of each
+    other: the same optimum (before the final stage was made start-independent, the cases below were
+    20-190 % off the bar, their cameras 26-210 % of the bar's error apart).
+    """
+    rec = incremental_sfm(tracks, K, np.random.default_rng(0))
+    ref = bundle_from_cameras(tracks, K, R, t)
+    assert rec.registered.all()
+    rot, rot_ref = camera_errors(rec, R, t)[0].mean(), camera_errors(ref, R, t)[0].mean()
+    assert abs(rot / rot_ref - 1) < 0.1, (rot, rot_ref)
+    assert camera_errors(rec, ref.R, ref.t)[0].mean() < 0.01 * rot_ref
+
+
 @pytest.fixture(scope="module")
 def clean():
     s = turntable()
@@ -317,6 +357,22 @@ def test_cli_failure_writes_nothing(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["K.txt", "tracks.txt"]
 
 
+# --- few views and forward motion: the same optimum as BA from the truth ------------------------------------------
+
+@pytest.mark.parametrize("seed", [205, 209, 222])
+def test_forward_corridor_reaches_ba_from_truth(seed):
+    """11 views moving forward, σ = 1 px, 5 % outliers (before: -20 %, +115 %, +190 % off the bar)."""
+    assert_same_optimum(*corridor(np.random.default_rng(seed)))
+
+
+@pytest.mark.parametrize("views", [(15, 17, 19), (7, 10, 13), (14, 17, 20)])
+def test_dino_three_views_reach_ba_from_truth(dino, views):
+    """Three views of the real tracks (before: +72 %, +62 %, -34 % mean rotation error against the bar)."""
+    v = list(views)
+    tracks = dino.tracks[v][:, np.isfinite(dino.tracks[v][..., 0]).sum(0) >= 2]
+    assert_same_optimum(tracks, dino.K, dino.R[v], dino.t[v])
+
+
 # --- the dinosaur -----------------------------------------------------------------------------------------------
 
 
@@ -334,6 +390,6 @@ def test_dino_real_tracks_match_ba_from_truth(dino):
     rot, cen = camera_errors(rec, dino.R, dino.t)
     rot_ref, _ = camera_errors(ref, dino.R, dino.t)
     assert 0.15 < rot_ref.mean() < 0.5                                   # "about 0.3 degrees" (data README)
-    assert abs(rot.mean() - rot_ref.mean()) < 0.1 * rot_ref.mean()
-    assert camera_errors(rec, ref.R, ref.t)[0].mean() < 0.1 * rot_ref.mean()
+    assert abs(rot.mean() - rot_ref.mean()) < 0.02 * rot_ref.mean()
+    assert camera_errors(rec, ref.R, ref.t)[0].mean() < 0.01 * rot_ref.mean()     # the same optimum
     assert cen.max() < 0.05
