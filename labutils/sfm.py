@@ -320,13 +320,14 @@ def _camera_matrices(K, R, t, views):
     return np.einsum("vij,vjk->vik", K[views], np.concatenate([R[views], t[views, :, None]], axis=2))
 
 
-def _refine_points(Ps, xs, use, X, n_iter=5):
+def _refine_points(Ps, xs, use, X, n_iter=3):
     """Each point moved to (near) its maximum-likelihood position in the views of ``use`` (H&Z Sec. 12.3, A6.2).
 
-    A few Levenberg–Marquardt steps on each point's reprojection error, all points at once (3×3 normal
-    equations per point). The DLT minimises an algebraic error whose weights depend on the world frame:
-    from cameras that differ only by a similarity it gives reprojection errors that differ by pixels, so
-    decisions taken on them (inlier or not) would depend on the gauge. The reprojection error does not.
+    ``n_iter`` Levenberg–Marquardt steps on each point's reprojection error, all points at once (3×3 normal
+    equations per point); from the DLT, three reach the optimum to 1e-6 px on the dinosaur. The DLT
+    minimises an algebraic error whose weights depend on the world frame: from cameras that differ only
+    by a similarity it gives reprojection errors that differ by pixels, so decisions taken on them
+    (inlier or not) would depend on the gauge. The reprojection error does not.
 
     Parameters
     ----------
