@@ -22,12 +22,13 @@ All thresholds are in pixels; every bundle adjustment is :func:`labutils.bundle.
 the Schur complement) with a robust loss (Cauchy, scale 1 px, by default).
 
 The result is a :class:`Reconstruction`. Run it from the command line with
-``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
+``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply [--images DIR]] [--seed N]``.
 """
 import contextlib
 import json
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -35,10 +36,12 @@ from numpy.typing import ArrayLike
 from . import _cli
 from ._validation import as_array, as_calibration, as_positive, as_rng, as_rotations, as_tracks
 from .bundle import bundle_adjust
-from .formats import ply_text, read_calibration, read_tracks
+from .formats import read_calibration, read_tracks
 from .geometry import camera_center
 from .pnp import pnp_ransac
+from .pointcloud import cloud_from_reconstruction
 from .reconstruction import Reconstruction, masked_reprojection_errors
+from .scene import _read_rgb
 from .triangulation import ray_angles_deg, triangulate_tracks
 from .twoview import two_view_reconstruction
 
@@ -526,15 +529,38 @@ def _parser():
     parser.add_argument("tracks", help="track file: one row per track, 'x y' per view, -1 -1 where unseen")
     parser.add_argument("K", help="calibration: one 3x3 matrix shared by all views, or one per view stacked (3V rows)")
     parser.add_argument("--out", required=True, help="the result, JSON: cameras (null if unregistered) and points")
-    parser.add_argument("--ply", help="also write the points as a PLY file")
+    parser.add_argument("--ply", help="also write the points as a PLY file, with normals oriented to face the cameras "
+                                      "that see them (and colours, with --images)")
+    parser.add_argument("--images", metavar="DIR", help="the views' images (one per view, in sorted file-name order): "
+                                                        "the PLY points get their colours from them")
+    parser.add_argument("--ply-format", choices=["binary", "ascii"], default="binary",
+                        help="PLY encoding (default binary little-endian)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
     parser.add_argument("--threshold", type=float, default=4.0, help="pixel threshold (default 4)")
     parser.add_argument("--quiet", action="store_true", help="no progress log, only the summary line")
     return parser
 
 
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+
+
+def _read_image_folder(folder, n_views):
+    """The RGB images of a folder in sorted file-name order, one per view; ``CommandError`` naming the folder."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise _cli.CommandError(f"{folder}: not a folder (--images takes the folder of the views' images)")
+    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if len(paths) != n_views:
+        raise _cli.CommandError(f"{folder}: {len(paths)} images ({', '.join(IMAGE_SUFFIXES)}) for {n_views} views: "
+                                "one image per view, in sorted file-name order")
+    return [_read_rgb(p) for p in paths]
+
+
 def main(argv=None):
-    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N]``.
+    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply [--images DIR]] [--seed N]``.
+
+    ``--ply`` writes the triangulated points with normals (PCA over 12 neighbours, turned to face the cameras that
+    see each point: :func:`labutils.pointcloud.cloud_from_reconstruction`) and, with ``--images``, their colours.
 
     The progress log goes to stderr, the summary to stdout. Exit status 0 on success; 2 for a bad input file or
     argument, an output that cannot be written (checked before the reconstruction), or a reconstruction that
@@ -546,15 +572,23 @@ def main(argv=None):
     outs = [_cli.check_output_path(args.out)] + ([_cli.check_output_path(args.ply)] if args.ply else [])
     if not (np.isfinite(args.threshold) and args.threshold > 0):
         raise _cli.CommandError(f"--threshold must be a positive number of pixels; got {args.threshold}")
+    if args.images and not args.ply:
+        raise _cli.CommandError(f"{args.images}: --images colours the PLY points: give --ply too")
+    images = _read_image_folder(args.images, tracks.shape[0]) if args.images else None
     try:
         with contextlib.redirect_stdout(sys.stderr):
             rec = incremental_sfm(tracks, K, rng=np.random.default_rng(args.seed), threshold_px=args.threshold,
                                   verbose=not args.quiet)
     except ValueError as exc:
         raise _cli.CommandError(f"{args.tracks}: the reconstruction failed: {exc}") from None
-    _cli.write_atomically(outs[0], json.dumps(rec.to_dict()) + "\n")
     if args.ply:
-        _cli.write_atomically(outs[1], ply_text(rec.X[np.isfinite(rec.X[:, 0])]))
+        try:
+            cloud = cloud_from_reconstruction(rec, images=images, k=min(12, max(rec.n_points, 3)))
+        except ValueError as exc:
+            raise _cli.CommandError(f"{args.ply}: cannot orient the points: {exc}") from None
+        cloud.write_ply(outs[1], format="ascii" if args.ply_format == "ascii" else "binary_little_endian",
+                        comments=["written by python -m labutils.sfm: normals face the cameras that see each point"])
+    _cli.write_atomically(outs[0], json.dumps(rec.to_dict()) + "\n")
     print(rec.summary())
     print(f"wrote {args.out}" + (f" and {args.ply}" if args.ply else ""))
     return 0

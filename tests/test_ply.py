@@ -15,7 +15,7 @@ from labutils.ply import (
     write_ply,
     write_points,
 )
-from labutils.sfm import ply_text
+from labutils.formats import ply_text
 
 # Greg Turk's example from "The PLY polygon file format" (1994): a cube, with a comment and an obj_info line.
 TURK_CUBE = """ply
