@@ -2,12 +2,16 @@
 visibility by a depth test, and vertex colours from the most frontal unoccluded view.
 
 1. **A Delaunay mesh** (:func:`delaunay_mesh`): the 3D Delaunay tetrahedralisation of the points (scipy's Qhull)
-   fills their convex hull. Tetrahedra with an edge longer than ``max_edge`` (by default a multiple of the median
-   nearest-neighbour spacing) bridge gaps that the surface does not: they are removed — the idea of alpha shapes
-   (Edelsbrunner & Mücke, ACM TOG 1994) with a simpler test. The surface is the set of faces that belong to exactly
-   one remaining tetrahedron, each turned to face out of it. (Visibility could remove more: the space between a
-   camera and a point it sees is empty — Labatut, Pons & Keriven, ICCV 2007, do this with a graph cut; removing
-   every tetrahedron a line of sight crosses, without one, erodes the surface wherever the points are noisy.)
+   fills their convex hull, bridging gaps and concavities the surface does not. They are carved away from the
+   outside inwards: starting outside the hull, a flood fill enters a tetrahedron through any face with an edge
+   longer than ``max_edge`` (by default a multiple of the median nearest-neighbour spacing) — Boissonnat's
+   sculpting (ACM TOG 1984), close to an alpha shape (Edelsbrunner & Mücke, ACM TOG 1994). Tetrahedra it cannot
+   reach are the solid, even the large ones inside; the surface is the set of faces that belong to exactly one
+   solid tetrahedron, each turned to face out of it: closed, and with no inner shell (deleting every tetrahedron
+   with a long edge would hollow the object out and leave two layers of faces at its surface). Visibility could
+   carve more — the space between a camera and a point it sees is empty (Labatut, Pons & Keriven, ICCV 2007, with
+   a graph cut); deleting every tetrahedron a line of sight crosses, without one, erodes the surface where the
+   points are noisy.
 2. **A depth buffer** (:func:`render_depth`): every triangle scan-converted into the image, its depth interpolated
    perspective-correctly (1/z is affine in the image), the nearest kept per pixel.
 3. **Visibility** (:func:`vertex_views`): a vertex is seen by a view when it projects into the image, in front of
@@ -24,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from ._validation import as_count, as_points, as_positive
@@ -150,13 +156,13 @@ class DelaunayMesh:
     point_index : (M,) int ndarray
         Which input point each vertex is (to carry colours and normals over).
     max_edge : float
-        The edge length above which a tetrahedron was removed.
+        The edge length through which the carving passed.
     spacing : float
         The median distance from a point to its nearest neighbour.
     n_tetrahedra : int
         Of the full Delaunay tetrahedralisation.
     n_removed : int
-        Removed for a long edge.
+        Tetrahedra carved away.
     """
 
     vertices: np.ndarray
@@ -169,15 +175,15 @@ class DelaunayMesh:
 
 
 def delaunay_mesh(X: ArrayLike, *, max_edge: float | None = None, edge_factor: float = 8.0) -> DelaunayMesh:
-    """A surface from points: Delaunay tetrahedra, those with a long edge removed, the boundary of the rest.
+    """A surface from points: Delaunay tetrahedra, carved from outside through long edges, the boundary of the rest.
 
     Parameters
     ----------
     X : (N, 3) array_like
         Points, N >= 4, not all on one plane.
     max_edge : float, optional
-        Tetrahedra with a longer edge are removed. Default: ``edge_factor`` times the median distance from a point
-        to its nearest neighbour.
+        The carving from outside passes through faces with a longer edge. Default: ``edge_factor`` times the
+        median distance from a point to its nearest neighbour.
     edge_factor : float
 
     Returns
@@ -208,9 +214,7 @@ def delaunay_mesh(X: ArrayLike, *, max_edge: float | None = None, edge_factor: f
     if max_edge is None:
         max_edge = edge_factor * spacing
     max_edge = as_positive(max_edge, "max_edge")
-    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    longest = np.max([np.linalg.norm(X[T[:, a]] - X[T[:, b]], axis=1) for a, b in pairs], axis=0)
-    keep = longest <= max_edge
+    keep = ~_sculpt(tri, X, max_edge)
     F = boundary_faces(T[keep], X)
     if len(F) == 0:
         raise ValueError(f"no tetrahedron is left (max_edge = {max_edge:.3g}, median spacing {spacing:.3g}): raise "
@@ -218,6 +222,23 @@ def delaunay_mesh(X: ArrayLike, *, max_edge: float | None = None, edge_factor: f
     used, F = np.unique(F, return_inverse=True)
     return DelaunayMesh(X[used], F.reshape(-1, 3).astype(np.int64), used, float(max_edge), spacing, len(T),
                         int((~keep).sum()))
+
+
+def _sculpt(tri, X, max_edge):
+    """(T,) bool: the tetrahedra reached from outside the convex hull through faces with an edge longer than
+    ``max_edge`` (a flood fill over the tetrahedra's face adjacency; Boissonnat 1984)."""
+    T = tri.simplices
+    n = len(T)
+    faces = T[:, _TET_FACES]                                             # (T, 4, 3): face k is opposite vertex k
+    P = X[faces]
+    longest = np.linalg.norm(P - P[:, :, [1, 2, 0]], axis=-1).max(axis=-1)
+    wide = longest > max_edge
+    j, k = np.nonzero(wide)
+    other = tri.neighbors[j, k]
+    other = np.where(other < 0, n, other)                               # node n: the outside of the hull
+    graph = coo_matrix((np.ones(len(j)), (j, other)), shape=(n + 1, n + 1))
+    _, label = connected_components(graph, directed=False)
+    return label[:n] == label[n]
 
 
 # --------------------------------------------------------------------------------------------------------------
