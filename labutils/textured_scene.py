@@ -122,11 +122,11 @@ class TexturedScene:
 
 
 def _albedo(X):
-    """Orange and yellow stripes around the vertical axis, with a slow blue band: a texture with edges."""
+    """Orange and yellow stripes around the vertical axis, with a green band: a texture with edges."""
     s = 0.5 + 0.5 * np.sin(24.0 * np.arctan2(X[:, 1], X[:, 0]) + 9.0 * X[:, 2])
     base = np.array([225.0, 110.0, 35.0]) * (1 - s)[:, None] + np.array([245.0, 215.0, 60.0]) * s[:, None]
     band = np.exp(-((X[:, 2] - 0.25) / 0.06) ** 2)[:, None]
-    return base * (1 - band) + np.array([70.0, 90.0, 200.0]) * band
+    return base * (1 - band) + np.array([60.0, 150.0, 70.0]) * band
 
 
 def _first_hit(C, d, spheres):
