@@ -369,7 +369,8 @@ class VertexViews:
 
 
 def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike,
-                 images: Sequence, *, depth_tol: float | None = None, buffer_scale: float = 0.5) -> VertexViews:
+                 images: Sequence, *, depth_tol: float | None = None, buffer_scale: float = 0.5,
+                 normals: ArrayLike | None = None) -> VertexViews:
     """Which views see each vertex unoccluded, how frontally, and the colour each view gives it.
 
     For each view with an image: the mesh's depth buffer (:func:`render_depth`); a vertex is visible when it
@@ -393,6 +394,10 @@ def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     buffer_scale : float
         The depth buffer's resolution relative to the image's (0.5: half the width and height, a quarter of the
         work; occlusion is decided to within two pixels).
+    normals : (N, 3) array_like, optional
+        Outward unit normals of the vertices (default: :func:`vertex_normals`). A mesh through noisy points is
+        jagged at the scale of its edges, and its vertex normals with it: the point cloud's PCA normals
+        (:func:`labutils.pointcloud.orient_normals`) are then the better estimate.
 
     Returns
     -------
@@ -421,7 +426,12 @@ def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
         raise ValueError(f"buffer_scale must be in (0, 1]; got {buffer_scale!r}")
     # pixel centres at integers: the image spans [-½, W − ½]; scaled, x' = s x + (s − 1)/2
     S = np.array([[scale, 0, (scale - 1) / 2], [0, scale, (scale - 1) / 2], [0, 0, 1]])
-    normals = vertex_normals(V, F)
+    if normals is None:
+        normals = vertex_normals(V, F)
+    else:
+        normals = as_points(normals, "normals", dim=3, like=(V, "vertices"))
+        if np.any(np.abs(np.linalg.norm(normals, axis=1) - 1) > 1e-6):
+            raise ValueError("normals must be unit vectors")
     C = _centres(R, t)
     n_v, n = len(R), len(V)
     inside = np.zeros((n_v, n), bool)

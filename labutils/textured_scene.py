@@ -121,6 +121,25 @@ class TexturedScene:
         return np.where(np.asarray(visible, bool)[..., None], x, np.nan)
 
 
+    def make_tracks(self, n: int, *, noise_px: float, rng: np.random.Generator, min_views: int = 2) -> tuple:
+        """Surface points seen by at least ``min_views`` views, and their tracks with Gaussian pixel noise.
+
+        Returns
+        -------
+        X : (M, 3) ndarray
+            The points (M <= n: those seen by too few views are dropped).
+        normals : (M, 3) ndarray
+        tracks : (V, M, 2) ndarray
+            Noisy pixels, NaN where a view does not see a point.
+        """
+        noise_px = as_positive(noise_px, "noise_px", allow_zero=True)
+        X, normals = self.surface_points(n, rng=rng)
+        vis = self.visibility(X, normals)
+        keep = vis.sum(axis=0) >= as_count(min_views, "min_views", 1)
+        X, normals, vis = X[keep], normals[keep], vis[:, keep]
+        return X, normals, self.project(X, vis) + rng.normal(scale=noise_px, size=(self.n_views, len(X), 2))
+
+
 def _albedo(X):
     """Orange and yellow stripes around the vertical axis, with a green band: a texture with edges."""
     s = 0.5 + 0.5 * np.sin(24.0 * np.arctan2(X[:, 1], X[:, 0]) + 9.0 * X[:, 2])
