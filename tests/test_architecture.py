@@ -26,7 +26,7 @@ LAYERS = {
     "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
     "reconstruction": ["twoview", "reconstruction", "pointcloud", "sfm"],
     "precision": ["uncertainty", "noise_study"],
-    "the 3D model": ["carving", "carve", "textured_scene", "meshing"],
+    "the 3D model": ["carving", "carve", "textured_scene", "meshing", "texturing"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
     "presentation and tools": ["plotting", "plotting_calibration", "carving_plots", "bench", "exercises",
                                "notebook_filter"],

@@ -9,7 +9,7 @@ from labutils.exercises.ex10_model import (
     check_orient_normal,
     check_pca_normal,
 )
-from labutils.meshing import most_frontal_view
+from labutils.texturing import most_frontal_view
 
 
 @pytest.mark.parametrize("check, func", [(check_pca_normal, _reference_pca_normal),

@@ -59,7 +59,7 @@ def test_ply_with_images_has_colours_and_outward_normals(snowman_files):
     R = np.array([c["R"] for c in res["cameras"]])
     t = np.array([c["t"] for c in res["cameras"]])
     inl = np.zeros((s.n_views, len(X)), bool)
-    for k, p in enumerate(res["points"]):
+    for p in res["points"]:
         inl[p["views"], p["track"]] = True
     rec = Reconstruction(R=R, t=t, registered=np.ones(s.n_views, bool), X=np.full((len(X), 3), np.nan),
                          inliers=inl, order=res["order"], K=s.K)

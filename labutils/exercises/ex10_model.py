@@ -2,7 +2,7 @@
 visibility, and the most frontal view of a vertex."""
 import numpy as np
 
-from ..meshing import most_frontal_view
+from ..texturing import most_frontal_view
 from . import run_checks
 
 __all__ = ["check_pca_normal", "check_orient_normal", "check_most_frontal_view"]
@@ -175,12 +175,13 @@ def _diagnose_frontal(out, X, normals, C, visible):
     dots = np.einsum("vni,ni->vn", d, normals)
     masked = np.where(visible, cos, -np.inf)
     if np.array_equal(out[seen], np.argmax(cos, axis=0)[seen]):
-        return "you ignored visibility: choose among the views that SEE the vertex (an occluded view sees another surface)"
+        return ("you ignored visibility: choose among the views that SEE the vertex (an occluded view sees another "
+                "surface)")
     if np.array_equal(out[seen], np.argmin(np.where(visible, cos, np.inf), axis=0)[seen]):
         return "you took the least frontal view: the most frontal one has the LARGEST cosine"
     if np.array_equal(out[seen], np.argmax(np.where(visible, dots, -np.inf), axis=0)[seen]):
-        return ("you compared n · (C - X) without dividing by the distance ||C - X||: that favours far cameras; compare "
-                "cosines")
+        return ("you compared n · (C - X) without dividing by the distance ||C - X||: that favours far cameras; "
+                "compare cosines")
     ranks = [int(np.argmax(masked[visible[:, i], i])) for i in np.flatnonzero(seen)]
     if np.array_equal(out[seen], ranks):
         return "you returned the position among the visible views; return the view's own index (0..V-1)"
