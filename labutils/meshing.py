@@ -32,7 +32,10 @@ __all__ = ["DelaunayMesh", "delaunay_mesh", "boundary_faces", "face_normals", "v
 # --------------------------------------------------------------------------------------------------------------
 def _as_mesh(vertices, faces):
     V = as_points(vertices, "vertices", dim=3, min_n=3)
-    F = np.asarray(faces)
+    try:
+        F = np.asarray(faces)
+    except ValueError as exc:
+        raise ValueError(f"faces must be an (F, 3) integer array of triangles: {exc}") from None
     if F.ndim != 2 or F.shape[1] != 3 or (F.size and F.dtype.kind not in "iu"):
         raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
     if len(F) == 0:
@@ -109,9 +112,14 @@ def boundary_faces(tetrahedra: ArrayLike, points: ArrayLike) -> np.ndarray:
     6
     """
     X = as_points(points, "points", dim=3)
-    T = np.asarray(tetrahedra)
+    try:
+        T = np.asarray(tetrahedra)
+    except ValueError as exc:
+        raise ValueError(f"tetrahedra must be a (T, 4) integer array: {exc}") from None
     if T.ndim != 2 or T.shape[1] != 4 or (T.size and T.dtype.kind not in "iu"):
         raise ValueError(f"tetrahedra must be a (T, 4) integer array; got shape {T.shape}")
+    if T.size and (T.min() < 0 or T.max() >= len(X)):
+        raise ValueError(f"tetrahedra hold indices {int(T.min())}..{int(T.max())}, but points has {len(X)} rows")
     if len(T) == 0:
         return np.zeros((0, 3), np.int64)
     T = T.astype(np.int64)

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
-from ._validation import as_calibration, as_count, as_points, as_rotations, as_translations
+from ._validation import as_array, as_calibration, as_count, as_points, as_rotations, as_translations
 from .ply import write_points
 
 __all__ = ["LocalPCA", "PointCloud", "local_pca", "estimate_normals", "orient_normals", "facing_fractions",
@@ -43,8 +43,8 @@ __all__ = ["LocalPCA", "PointCloud", "local_pca", "estimate_normals", "orient_no
 # --------------------------------------------------------------------------------------------------------------
 def _as_cameras(K, R, t):
     """(Ks (V, 3, 3), R (V, 3, 3), t (V, 3), registered (V,)): NaN poses (unregistered views) kept as NaN."""
-    R = np.asarray(R, dtype=float)
-    t = np.asarray(t, dtype=float)
+    R = as_array(R, "R", "(V, 3, 3)")
+    t = as_array(t, "t", "(V, 3)")
     if R.ndim != 3 or R.shape[1:] != (3, 3):
         raise ValueError(f"R must have shape (V, 3, 3); got shape {R.shape}")
     if t.shape != (len(R), 3):
@@ -56,6 +56,8 @@ def _as_cameras(K, R, t):
     if partial.any():
         raise ValueError(f"view {int(np.flatnonzero(partial)[0])} has a partly NaN pose: a view that is not "
                          "registered has R and t entirely NaN")
+    if np.isinf(R).any() or np.isinf(t).any():
+        raise ValueError("R and t must be finite (NaN rows mark views that are not registered); got inf")
     if not registered.any():
         raise ValueError("no view has a finite pose (R and t are all NaN)")
     as_rotations(R[registered], "R")
@@ -64,12 +66,15 @@ def _as_cameras(K, R, t):
     return Ks, R, t, registered
 
 
-def _as_visible(visible, n_views, n_points, registered, name="visible"):
-    vis = np.asarray(visible)
+def _as_visible(visible, n_views, n_points, registered, name="visible", views="R", points="X"):
+    try:
+        vis = np.asarray(visible)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be a ({n_views}, {n_points}) boolean mask: {exc}") from None
     if vis.shape != (n_views, n_points):
         hint = " — transposed? it is (views, points)" if vis.shape == (n_points, n_views) else ""
-        raise ValueError(f"{name} must have shape ({n_views}, {n_points}) (views, points); got shape "
-                         f"{vis.shape}{hint}")
+        raise ValueError(f"{name} must have shape ({n_views}, {n_points}) (one row per view of {views}, one column "
+                         f"per point of {points}); got shape {vis.shape}{hint}")
     if vis.dtype != bool:
         raise ValueError(f"{name} must be a boolean mask; got dtype {vis.dtype}")
     ghost = vis[~registered].any(axis=1)
@@ -468,6 +473,7 @@ def oriented_point_cloud(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike,
     (True, True)
     """
     X = as_points(X, "X", dim=3)
+    _as_cameras(K, R, t)
     normals = orient_normals(X, estimate_normals(X, k=k), R, t, visible)
     colors = None if images is None else point_colors(X, images, K, R, t, visible)
     return PointCloud(X, normals, colors, np.asarray(visible, bool).copy(), np.arange(len(X)))

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_count, as_points, as_positive
+from ._validation import as_array, as_count, as_points, as_positive
 from .meshing import _as_mesh, vertex_normals
 from .pointcloud import _as_cameras, _as_image, _as_visible, _centres, _project, sample_image
 
@@ -78,7 +78,12 @@ def render_depth(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     (np.float64(3.0), np.int64(0), np.int64(-1))
     """
     V, F = _as_mesh(vertices, faces)
-    Ks, Rs, ts, _ = _as_cameras(K, np.asarray(R, float)[None], np.asarray(t, float)[None])
+    R, t = as_array(R, "R", "(3, 3)"), as_array(t, "t", "(3,)")
+    if R.shape != (3, 3) or t.shape != (3,):
+        raise ValueError(f"R must have shape (3, 3) and t shape (3,) (one view); got {R.shape} and {t.shape}")
+    if not (np.isfinite(R).all() and np.isfinite(t).all()):
+        raise ValueError("R and t must be finite (one registered view)")
+    Ks, Rs, ts, _ = _as_cameras(K, R[None], t[None])
     w, h = _as_size(image_size)
     x, z = _project(Ks[0], Rs[0], ts[0], V)
     if np.any(z[F] <= 0):
@@ -284,11 +289,13 @@ def most_frontal_view(X: ArrayLike, normals: ArrayLike, C: ArrayLike, visible: A
     """
     X = as_points(X, "X", dim=3)
     normals = as_points(normals, "normals", dim=3, like=(X, "X"))
-    C = np.asarray(C, dtype=float)
-    if C.ndim != 2 or C.shape[1] != 3:
-        raise ValueError(f"C must have shape (V, 3) (camera centres as rows); got shape {C.shape}")
+    C = as_array(C, "C", "(V, 3)")
+    if C.ndim != 2 or C.shape[1] != 3 or len(C) == 0:
+        raise ValueError(f"C must have shape (V, 3) (camera centres as rows, V >= 1); got shape {C.shape}")
     registered = np.all(np.isfinite(C), axis=1)
-    visible = _as_visible(visible, len(C), len(X), registered)
+    if np.isinf(C).any() or (np.isnan(C).any(axis=1) & ~np.isnan(C).all(axis=1)).any():
+        raise ValueError("C must be finite (a row entirely NaN marks a view that is not registered)")
+    visible = _as_visible(visible, len(C), len(X), registered, views="C")
     d = np.where(registered[:, None, None], C[:, None, :], 0.0) - X[None]
     cos = np.einsum("vni,ni->vn", d, normals) / np.maximum(np.linalg.norm(d, axis=-1), np.finfo(float).tiny)
     best = np.argmax(np.where(visible, cos, -np.inf), axis=0)
