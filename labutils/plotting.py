@@ -302,7 +302,8 @@ def _colors_rgb(colors, n):
 
 
 def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=None, *, mesh=None,
-                        frustum_scale=None, max_points=200_000, static=False, title=None, rng=None):
+                        frustum_scale=None, max_points=200_000, static=False, title=None, rng=None, normals=None,
+                        normal_length=None, max_normals=3000):
     """An interactive 3D view of a reconstruction: points (coloured if given), cameras as frusta, a mesh.
 
     Rotate, zoom and pan with the mouse in JupyterLab; the view is drawn by the browser (WebGL), so it stays
@@ -328,6 +329,10 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
     static : bool
         Draw with matplotlib (returns its ``Figure``) instead of plotly.
     title : str, optional
+    normals : (N, 3) array_like, optional
+        A normal per point, drawn as a short segment from it (for at most ``max_normals`` points, every k-th).
+    normal_length : float, optional
+        Length of a drawn normal (default 2 % of the scene's size).
 
     Returns
     -------
@@ -344,6 +349,17 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
     X = None if X is None else np.asarray(X, float).reshape(-1, 3)
     keep = None if X is None else np.all(np.isfinite(X), axis=1)
     cols = None if X is None else _colors_rgb(colors, len(X))
+    hedgehog = None
+    if normals is not None:
+        if X is None:
+            raise ValueError("normals need the points X they belong to")
+        N = np.asarray(normals, float)
+        if N.shape != X.shape:
+            raise ValueError(f"normals must have shape {X.shape} (one per point); got {N.shape}")
+        every = max(1, int(np.ceil(keep.sum() / max_normals)))
+        base, N = X[keep][::every], N[keep][::every]
+        length = normal_length or 0.02 * _scene_size(X[keep], None)
+        hedgehog = np.stack([base, base + length * N], axis=1)
     if X is not None:
         X, cols = X[keep], (None if cols is None else cols[keep])
         if len(X) > max_points:
@@ -362,26 +378,38 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
             Kd = np.array([[1.0, 0, 0.5], [0, 1.0, 0.375], [0, 0, 1]])
         segments = camera_frusta(R, t, Kd, size, scale)
     if static:
+        if hedgehog is not None:
+            segments = hedgehog if segments is None else np.concatenate([segments, hedgehog])
         return _static_view(X, cols, segments, mesh, title)
     import plotly.graph_objects as go
 
     traces = []
     if X is not None:
-        marker = dict(size=1.5, color=("rgb(40,40,40)" if cols is None else
-                                       [f"rgb({int(255 * r)},{int(255 * g)},{int(255 * b)})" for r, g, b in cols]))
+        marker = dict(size=1.5, color=("rgb(40,40,40)" if cols is None else _rgb_strings(cols)))
+        # _validate=False: plotly checks every colour string of 10⁵ points one by one (seconds); ours are well formed
         traces.append(go.Scatter3d(x=X[:, 0], y=X[:, 1], z=X[:, 2], mode="markers", marker=marker, name="points",
-                                   hoverinfo="skip"))
+                                   hoverinfo="skip", _validate=False))
     if segments is not None and len(segments):
         xyz = np.concatenate([segments, np.full((len(segments), 1, 3), np.nan)], axis=1).reshape(-1, 3)
         traces.append(go.Scatter3d(x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2], mode="lines", name="cameras",
                                    line=dict(color="royalblue", width=2), hoverinfo="skip"))
+    if hedgehog is not None and len(hedgehog):
+        xyz = np.concatenate([hedgehog, np.full((len(hedgehog), 1, 3), np.nan)], axis=1).reshape(-1, 3)
+        traces.append(go.Scatter3d(x=xyz[:, 0], y=xyz[:, 1], z=xyz[:, 2], mode="lines", name="normals",
+                                   line=dict(color="crimson", width=2), hoverinfo="skip"))
     if mesh is not None:
         traces.append(_mesh_trace(*mesh))
-    fig = go.Figure(traces)
+    fig = go.Figure(traces, _validate=False)
     fig.update_layout(scene=dict(aspectmode="data", xaxis_title="x", yaxis_title="y", zaxis_title="z"),
                       margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=title, showlegend=False,
                       height=520)
     return fig
+
+
+def _rgb_strings(cols):
+    """'rgb(r,g,b)' strings of colours in 0..1."""
+    c = np.clip(np.round(255 * np.asarray(cols, float)), 0, 255).astype(np.int64)
+    return [f"rgb({r},{g},{b})" for r, g, b in c.tolist()]
 
 
 def _mesh_trace(vertices, faces, vertex_colors=None):
@@ -393,9 +421,9 @@ def _mesh_trace(vertices, faces, vertex_colors=None):
     kw = dict(color="lightgrey", flatshading=False)
     if vertex_colors is not None:
         c = _colors_rgb(vertex_colors, len(V))
-        kw = dict(vertexcolor=[f"rgb({int(255 * r)},{int(255 * g)},{int(255 * b)})" for r, g, b in c])
+        kw = dict(vertexcolor=_rgb_strings(c))
     return go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=F[:, 0], j=F[:, 1], k=F[:, 2], name="mesh",
-                     lighting=dict(ambient=0.5, diffuse=0.8, specular=0.1), hoverinfo="skip", **kw)
+                     lighting=dict(ambient=0.5, diffuse=0.8, specular=0.1), hoverinfo="skip", _validate=False, **kw)
 
 
 def show_mesh(vertices, faces, colors=None, *, static=False, title=None):
@@ -409,7 +437,7 @@ def show_mesh(vertices, faces, colors=None, *, static=False, title=None):
         return _static_view(None, None, None, (vertices, faces, colors), title)
     import plotly.graph_objects as go
 
-    fig = go.Figure([_mesh_trace(vertices, faces, colors)])
+    fig = go.Figure([_mesh_trace(vertices, faces, colors)], _validate=False)
     fig.update_layout(scene=dict(aspectmode="data"), margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=title,
                       height=520)
     return fig

@@ -14,7 +14,8 @@ class ImageNotReadable(OSError):
     """An image file of a data set cannot be read."""
 
 
-def _read_rgb(path):
+def read_rgb(path):
+    """Read an image file as an ``(H, W, 3)`` uint8 RGB array; ``ImageNotReadable`` if it cannot be read."""
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise ImageNotReadable(f"{path}: cannot read the image (missing, or not an image file)")
@@ -155,7 +156,7 @@ class Scene:
         """View ``i`` as an RGB ``(H, W, 3)`` uint8 array (real data only)."""
         if not self.image_paths:
             raise ValueError(f"the {self.source} scene '{self.name}' has no images")
-        return _read_rgb(self.image_paths[i])
+        return read_rgb(self.image_paths[i])
 
     def summary(self):
         """One line: what this scene is."""
@@ -209,4 +210,4 @@ class Views:
 
     def image(self, i):
         """View ``i`` as an RGB ``(H, W, 3)`` uint8 array."""
-        return _read_rgb(self.image_paths[i])
+        return read_rgb(self.image_paths[i])

@@ -3,9 +3,10 @@
 The pipeline (H&Z Ch. 18 and Sec. 9.6, 12.2, 18.1; Snavely, Seitz & Szeliski, "Photo tourism", 2006;
 Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016):
 
-1. **Initial pair**: the pairs of views sharing the most tracks are each reconstructed (F by RANSAC, E,
-   the pose by cheirality, a calibrated two-view BA, triangulation); among those whose median
-   triangulation angle is large enough, the one with the largest ``points × median angle`` wins.
+1. **Initial pair** (:func:`labutils.view_selection.choose_initial_pair`): the pairs of views sharing
+   the most tracks are each reconstructed (F by RANSAC, E, the pose by cheirality, a calibrated two-view
+   BA, triangulation); among those whose median triangulation angle is large enough, the one with the
+   largest ``points × median angle`` wins.
 2. **Register views one at a time**: the next view is the one that sees the most already-triangulated
    points; its pose comes from robust PnP (P3P in RANSAC, then refinement).
 3. **Triangulate** the tracks the new view shares with registered views, robustly: the largest
@@ -22,7 +23,7 @@ All thresholds are in pixels; every bundle adjustment is :func:`labutils.bundle.
 the Schur complement) with a robust loss (Cauchy, scale 1 px, by default).
 
 The result is a :class:`Reconstruction`. Run it from the command line with
-``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N] [--global]``;
+``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply [--images DIR]] [--seed N] [--global]``;
 ``--global`` runs global SfM instead (:func:`labutils.global_sfm.global_sfm`: rotation averaging, translations,
 BA), finished by the same last stage, :func:`bundle_from_cameras`.
 """
@@ -30,6 +31,7 @@ import contextlib
 import json
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,101 +39,23 @@ from numpy.typing import ArrayLike
 from . import _cli
 from ._validation import as_array, as_calibration, as_positive, as_rng, as_rotations, as_tracks
 from .bundle import bundle_adjust
-from .formats import ply_text, read_calibration, read_tracks
+from .formats import read_calibration, read_tracks
 from .geometry import camera_center
 from .global_sfm import global_sfm
 from .pnp import pnp_ransac
+from .pointcloud import cloud_from_reconstruction
 from .reconstruction import Reconstruction, masked_reprojection_errors
+from .scene import read_rgb
 from .triangulation import ray_angles_deg, triangulate_tracks
 from .twoview import two_view_reconstruction
-from .view_selection import as_scores, as_strategy, next_view  # noqa: F401 (next_view: public here too)
-
-
-def covisibility(tracks):
-    """(V, V) int: how many tracks each pair of views shares (the diagonal: tracks seen by each view).
-
-    >>> x = np.full((3, 2, 2), np.nan); x[:, 0] = 1.0; x[:2, 1] = 2.0
-    >>> covisibility(x)
-    array([[2, 2, 1],
-           [2, 2, 1],
-           [1, 1, 1]])
-    """
-    seen = np.all(np.isfinite(np.asarray(tracks, float)), axis=-1).astype(np.int64)
-    return seen @ seen.T
-
-
-def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, n_candidates=6, min_tracks=30,
-                        min_angle_deg=3.0, threshold_px=4.0,
-                        confidence=0.999):
-    """Pick the initial pair: many shared tracks and a wide enough baseline.
-
-    The ``n_candidates`` pairs sharing the most tracks (at least ``min_tracks``) are each reconstructed
-    with :func:`two_view_reconstruction`. Among those whose median triangulation angle reaches
-    ``min_angle_deg`` the pair with the largest ``points × median angle`` wins (more points, and each
-    better determined: a point's depth error falls about as 1 / angle); if none reaches it, the pair with
-    the widest median angle.
-
-    Parameters
-    ----------
-    tracks : (V, T, 2) array_like
-        NaN where unseen.
-    K : (3, 3) or (V, 3, 3) array_like
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    best : dict
-        ``i, j`` (views), ``R, t`` (view j relative to view i), ``track`` (indices of the accepted tracks),
-        ``X`` (their points in view i's frame), ``median_angle``.
-    table : list of dict
-        One row per candidate, most shared tracks first: ``i, j, shared, points, median_angle`` (and
-        ``failed``, the reason, when the two-view reconstruction failed).
-
-    Raises
-    ------
-    ValueError
-        If no pair of views shares ``min_tracks`` tracks.
-    """
-    tracks = as_tracks(tracks, min_views=2)
-    Ks = as_calibration(K, "K", n_views=tracks.shape[0])
-    cov = covisibility(tracks)
-    i, j = np.triu_indices(len(cov), 1)
-    keep = cov[i, j] >= max(min_tracks, 8)
-    if not keep.any():
-        raise ValueError(f"no pair of views shares {max(min_tracks, 8)} tracks: cannot start a reconstruction "
-                         f"(the best pair shares {cov[i, j].max()})")
-    i, j = i[keep], j[keep]
-    order = np.argsort(-cov[i, j], kind="stable")[:n_candidates]
-    table, results = [], []
-    for a, b in zip(i[order], j[order]):
-        x1, x2, idx = _pair(tracks, a, b)
-        try:
-            R, t, X, med = two_view_reconstruction(x1, x2, Ks[a], Ks[b], rng=rng, threshold_px=threshold_px,
-                                                   confidence=confidence)
-        except ValueError as exc:          # e.g. no baseline: no pose puts the points in front
-            table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=0, median_angle=0.0, failed=str(exc)))
-            results.append(None)
-            continue
-        ok = np.isfinite(X[:, 0])
-        table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=int(ok.sum()), median_angle=med))
-        results.append(dict(i=int(a), j=int(b), R=R, t=t, track=idx[ok], X=X[ok], median_angle=med))
-    usable = [k for k, r in enumerate(results) if r is not None and table[k]["points"] >= 8]
-    if not usable:
-        raise ValueError("no candidate pair gave a two-view reconstruction: "
-                         + "; ".join(f"({r['i']}, {r['j']}): {r.get('failed', 'too few points')}" for r in table))
-    wide = [k for k in usable if table[k]["median_angle"] >= min_angle_deg]
-    if wide:
-        best = max(wide, key=lambda k: (table[k]["points"] * table[k]["median_angle"], -k))
-    else:
-        best = max(usable, key=lambda k: (table[k]["median_angle"], -k))
-    return results[best], table
-
-
-def _pair(tracks, i, j):
-    both = np.all(np.isfinite(tracks[i]), axis=-1) & np.all(np.isfinite(tracks[j]), axis=-1)
-    idx = np.flatnonzero(both)
-    return tracks[i, idx], tracks[j, idx], idx
-
+from .view_selection import (  # noqa: F401 (covisibility, next_view: public here too)
+    _pair,
+    as_scores,
+    as_strategy,
+    choose_initial_pair,
+    covisibility,
+    next_view,
+)
 
 # ---------------------------------------------------------------------------------------------
 # The incremental pipeline
@@ -544,7 +468,12 @@ def _parser():
     parser.add_argument("tracks", help="track file: one row per track, 'x y' per view, -1 -1 where unseen")
     parser.add_argument("K", help="calibration: one 3x3 matrix shared by all views, or one per view stacked (3V rows)")
     parser.add_argument("--out", required=True, help="the result, JSON: cameras (null if unregistered) and points")
-    parser.add_argument("--ply", help="also write the points as a PLY file")
+    parser.add_argument("--ply", help="also write the points as a PLY file, with normals oriented to face the cameras "
+                                      "that see them (and colours, with --images)")
+    parser.add_argument("--images", metavar="DIR", help="the views' images (one per view, in sorted file-name order): "
+                                                        "the PLY points get their colours from them")
+    parser.add_argument("--ply-format", choices=["binary", "ascii"], default="binary",
+                        help="PLY encoding (default binary little-endian)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
     parser.add_argument("--threshold", type=float, default=4.0, help="pixel threshold (default 4)")
     parser.add_argument("--quiet", action="store_true", help="no progress log, only the summary line")
@@ -562,8 +491,27 @@ def _global_then_final(tracks, K, rng, threshold_px, verbose):
     return rec
 
 
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm")
+
+
+def _read_image_folder(folder, n_views):
+    """The RGB images of a folder in sorted file-name order, one per view; ``CommandError`` naming the folder."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise _cli.CommandError(f"{folder}: not a folder (--images takes the folder of the views' images)")
+    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if len(paths) != n_views:
+        raise _cli.CommandError(f"{folder}: {len(paths)} images ({', '.join(IMAGE_SUFFIXES)}) for {n_views} views: "
+                                "one image per view, in sorted file-name order")
+    return [read_rgb(p) for p in paths]
+
+
 def main(argv=None):
-    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply] [--seed N] [--global]``.
+    """``python -m labutils.sfm TRACKS.txt K.txt --out RESULT.json [--ply POINTS.ply [--images DIR]] [--seed N]
+    [--global]``.
+
+    ``--ply`` writes the triangulated points with normals (PCA over 12 neighbours, turned to face the cameras that
+    see each point: :func:`labutils.pointcloud.cloud_from_reconstruction`) and, with ``--images``, their colours.
 
     The progress log goes to stderr, the summary to stdout. Exit status 0 on success; 2 for a bad input file or
     argument, an output that cannot be written (checked before the reconstruction), or a reconstruction that
@@ -575,6 +523,9 @@ def main(argv=None):
     outs = [_cli.check_output_path(args.out)] + ([_cli.check_output_path(args.ply)] if args.ply else [])
     if not (np.isfinite(args.threshold) and args.threshold > 0):
         raise _cli.CommandError(f"--threshold must be a positive number of pixels; got {args.threshold}")
+    if args.images and not args.ply:
+        raise _cli.CommandError(f"{args.images}: --images colours the PLY points: give --ply too")
+    images = _read_image_folder(args.images, tracks.shape[0]) if args.images else None
     try:
         with contextlib.redirect_stdout(sys.stderr):
             if args.global_sfm:
@@ -584,9 +535,14 @@ def main(argv=None):
                                       verbose=not args.quiet)
     except ValueError as exc:
         raise _cli.CommandError(f"{args.tracks}: the reconstruction failed: {exc}") from None
-    _cli.write_atomically(outs[0], json.dumps(rec.to_dict()) + "\n")
     if args.ply:
-        _cli.write_atomically(outs[1], ply_text(rec.X[np.isfinite(rec.X[:, 0])]))
+        try:
+            cloud = cloud_from_reconstruction(rec, images=images, k=min(12, max(rec.n_points, 3)))
+        except ValueError as exc:
+            raise _cli.CommandError(f"{args.ply}: cannot orient the points: {exc}") from None
+        cloud.write_ply(outs[1], format="ascii" if args.ply_format == "ascii" else "binary_little_endian",
+                        comments=["written by python -m labutils.sfm: normals face the cameras that see each point"])
+    _cli.write_atomically(outs[0], json.dumps(rec.to_dict()) + "\n")
     print(rec.summary())
     print(f"wrote {args.out}" + (f" and {args.ply}" if args.ply else ""))
     return 0

@@ -1,7 +1,9 @@
-"""Next-best-view: which view incremental structure from motion registers next.
+"""Which views structure from motion starts from and which it registers next.
 
-Each strategy scores every view from what the growing model knows (which views are registered, in which
-order, and which triangulated points each view sees); :func:`next_view` then takes the best-scoring view among
+:func:`choose_initial_pair` picks the two views the reconstruction starts from (many shared tracks, a wide
+enough baseline; :func:`covisibility` counts the shared tracks). After that comes next-best-view: each
+strategy scores every view from what the growing model knows (which views are registered, in which order,
+and which triangulated points each view sees); :func:`next_view` then takes the best-scoring view among
 those that see enough points to be registered (``min_inliers`` of :func:`labutils.sfm.incremental_sfm`).
 The strategies:
 
@@ -26,6 +28,7 @@ from numpy.typing import ArrayLike
 
 from ._validation import as_array, as_calibration, as_count, as_points, as_positive, as_rotation, as_tracks
 from .pnp import pose_jacobian
+from .twoview import two_view_reconstruction
 
 STRATEGIES = ("most_points", "pyramid", "sequential")
 PYRAMID_LEVELS = 6          # as COLMAP (kNumPoint3DVisibilityPyramidLevels)
@@ -306,3 +309,93 @@ def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigm
     if s[-1] <= 1e-12 * s[0]:
         raise ValueError("the points do not determine the pose (JᵀJ is singular): collinear points, or too few")
     return sigma_px ** 2 * np.linalg.inv(H)
+
+
+# ---------------------------------------------------------------------------------------------
+# The initial pair
+# ---------------------------------------------------------------------------------------------
+
+def covisibility(tracks):
+    """(V, V) int: how many tracks each pair of views shares (the diagonal: tracks seen by each view).
+
+    >>> x = np.full((3, 2, 2), np.nan); x[:, 0] = 1.0; x[:2, 1] = 2.0
+    >>> covisibility(x)
+    array([[2, 2, 1],
+           [2, 2, 1],
+           [1, 1, 1]])
+    """
+    seen = np.all(np.isfinite(np.asarray(tracks, float)), axis=-1).astype(np.int64)
+    return seen @ seen.T
+
+
+def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, n_candidates=6, min_tracks=30,
+                        min_angle_deg=3.0, threshold_px=4.0,
+                        confidence=0.999):
+    """Pick the initial pair: many shared tracks and a wide enough baseline.
+
+    The ``n_candidates`` pairs sharing the most tracks (at least ``min_tracks``) are each reconstructed
+    with :func:`two_view_reconstruction`. Among those whose median triangulation angle reaches
+    ``min_angle_deg`` the pair with the largest ``points × median angle`` wins (more points, and each
+    better determined: a point's depth error falls about as 1 / angle); if none reaches it, the pair with
+    the widest median angle.
+
+    Parameters
+    ----------
+    tracks : (V, T, 2) array_like
+        NaN where unseen.
+    K : (3, 3) or (V, 3, 3) array_like
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    best : dict
+        ``i, j`` (views), ``R, t`` (view j relative to view i), ``track`` (indices of the accepted tracks),
+        ``X`` (their points in view i's frame), ``median_angle``.
+    table : list of dict
+        One row per candidate, most shared tracks first: ``i, j, shared, points, median_angle`` (and
+        ``failed``, the reason, when the two-view reconstruction failed).
+
+    Raises
+    ------
+    ValueError
+        If no pair of views shares ``min_tracks`` tracks.
+    """
+    tracks = as_tracks(tracks, min_views=2)
+    Ks = as_calibration(K, "K", n_views=tracks.shape[0])
+    cov = covisibility(tracks)
+    i, j = np.triu_indices(len(cov), 1)
+    keep = cov[i, j] >= max(min_tracks, 8)
+    if not keep.any():
+        raise ValueError(f"no pair of views shares {max(min_tracks, 8)} tracks: cannot start a reconstruction "
+                         f"(the best pair shares {cov[i, j].max()})")
+    i, j = i[keep], j[keep]
+    order = np.argsort(-cov[i, j], kind="stable")[:n_candidates]
+    table, results = [], []
+    for a, b in zip(i[order], j[order]):
+        x1, x2, idx = _pair(tracks, a, b)
+        try:
+            R, t, X, med = two_view_reconstruction(x1, x2, Ks[a], Ks[b], rng=rng, threshold_px=threshold_px,
+                                                   confidence=confidence)
+        except ValueError as exc:          # e.g. no baseline: no pose puts the points in front
+            table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=0, median_angle=0.0, failed=str(exc)))
+            results.append(None)
+            continue
+        ok = np.isfinite(X[:, 0])
+        table.append(dict(i=int(a), j=int(b), shared=int(len(idx)), points=int(ok.sum()), median_angle=med))
+        results.append(dict(i=int(a), j=int(b), R=R, t=t, track=idx[ok], X=X[ok], median_angle=med))
+    usable = [k for k, r in enumerate(results) if r is not None and table[k]["points"] >= 8]
+    if not usable:
+        raise ValueError("no candidate pair gave a two-view reconstruction: "
+                         + "; ".join(f"({r['i']}, {r['j']}): {r.get('failed', 'too few points')}" for r in table))
+    wide = [k for k in usable if table[k]["median_angle"] >= min_angle_deg]
+    if wide:
+        best = max(wide, key=lambda k: (table[k]["points"] * table[k]["median_angle"], -k))
+    else:
+        best = max(usable, key=lambda k: (table[k]["median_angle"], -k))
+    return results[best], table
+
+
+def _pair(tracks, i, j):
+    both = np.all(np.isfinite(tracks[i]), axis=-1) & np.all(np.isfinite(tracks[j]), axis=-1)
+    idx = np.flatnonzero(both)
+    return tracks[i, idx], tracks[j, idx], idx

@@ -25,9 +25,9 @@ LAYERS = {
     "correspondences": ["features", "match"],
     "camera pose": ["pnp", "rotation_averaging", "global_translations"],
     "bundle adjustment": ["reprojection", "gauge", "lm_schur", "bundle"],
-    "reconstruction": ["twoview", "reconstruction", "view_selection", "global_sfm", "sfm"],
+    "reconstruction": ["twoview", "reconstruction", "view_selection", "global_sfm", "pointcloud", "sfm"],
     "precision": ["uncertainty", "noise_study"],
-    "the 3D model": ["carving", "carve"],
+    "the 3D model": ["carving", "carve", "textured_scene", "meshing", "texturing"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
     "presentation and tools": ["plotting", "plotting_calibration", "plotting_matches", "plotting_views",
                                "carving_plots", "bench", "exercises",
@@ -37,7 +37,12 @@ ORDER = [m for layer in LAYERS.values() for m in layer]
 
 # Modules longer than this hold more than one idea unless listed here with the reason.
 MAX_LINES = 600
-LONG_ON_PURPOSE = {}
+LONG_ON_PURPOSE = {
+    # The 8-point refuses noisy degenerate data by GRIC, which fits F by Sampson LM from the 8-point's own
+    # normalised steps: the estimator and its degeneracy test are one idea (moving the test out would make
+    # a cycle), and 60 lines are the docstring's measured table of why the test is built as it is.
+    "epipolar": 720,
+}
 
 
 def _modules():
@@ -107,7 +112,7 @@ def test_modules_are_one_idea_in_size():
     long = {}
     for mod, files in _modules().items():
         n = max(len(f.read_text().splitlines()) for f in files)
-        if n > MAX_LINES and mod not in LONG_ON_PURPOSE:
+        if n > LONG_ON_PURPOSE.get(mod, MAX_LINES):
             long[mod] = n
     assert not long, f"modules over {MAX_LINES} lines (split them, or say why in LONG_ON_PURPOSE): {long}"
 
