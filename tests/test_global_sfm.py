@@ -168,9 +168,9 @@ def test_cli_global_failure_writes_nothing(tmp_path):
 # --- the dinosaur ----------------------------------------------------------------------------------------------
 
 
-def test_dino_global_matches_incremental(dino, tmp_path):
-    """All 36 views, and after the same last stage the mean rotation error is within 10 % of the incremental
-    pipeline's (both are at the optimum for these tracks, about 0.3° from the given cameras)."""
+def test_dino_global_reaches_the_optimum(dino, tmp_path):
+    """All 36 views, and after the last stage the mean rotation error is within 10 % of the optimum's: the same
+    last stage run from the given cameras (about 0.28° from them; notebook 09 compares with incremental SfM)."""
     write_tracks(tmp_path / "tracks.txt", dino.tracks)
     np.savetxt(tmp_path / "K.txt", dino.K)
     r = _cli("tracks.txt", "K.txt", "--out", "res.json", "--global", "--quiet", cwd=tmp_path)
@@ -178,7 +178,7 @@ def test_dino_global_matches_incremental(dino, tmp_path):
     d = json.loads((tmp_path / "res.json").read_text())
     assert all(c is not None for c in d["cameras"])
     rot_g, cen_g = camera_errors(_record(d, dino.K), dino.R, dino.t)
-    inc = incremental_sfm(dino.tracks, dino.K, rng=np.random.default_rng(0))
-    rot_i, _ = camera_errors(inc, dino.R, dino.t)
-    assert inc.registered.all()
-    assert abs(rot_g.mean() - rot_i.mean()) < 0.1 * rot_i.mean() and cen_g.max() < 0.05
+    best = bundle_from_cameras(dino.tracks, dino.K, dino.R, dino.t)
+    rot_b, _ = camera_errors(best, dino.R, dino.t)
+    assert best.registered.all()
+    assert abs(rot_g.mean() - rot_b.mean()) < 0.1 * rot_b.mean() and cen_g.max() < 0.05
