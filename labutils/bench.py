@@ -1,4 +1,9 @@
-"""Benchmarks (printed, never asserted): ``python -m labutils.bench ba [--quick | --all]``.
+"""Benchmarks (printed, never asserted): ``python -m labutils.bench ba [--quick | --all]`` and
+``python -m labutils.bench notebooks [NOTEBOOK ...]``.
+
+``notebooks`` runs each notebook top to bottom in a fresh kernel (as nbval does; nothing is saved) and prints its
+seconds, its slowest cell, and whether it is within the suite's budget of 90 s per notebook; the README's run
+times are what it prints.
 
 ``ba`` times the bundle-adjustment solvers of :mod:`labutils.bundle` on
 
@@ -23,6 +28,8 @@ import json
 import os
 import sys
 import time
+from datetime import datetime
+from pathlib import Path
 
 import numpy as np
 
@@ -267,6 +274,61 @@ def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
                         "all parameters (pose, f, k1, k2, points)", runs=rows)
 
 
+NOTEBOOK_BUDGET_S = 90.0          # each notebook under nbval, on the 2-core CI machine (the developers' guide)
+NOTEBOOK_DIR = Path(__file__).resolve().parent.parent / "notebooks"
+
+
+def _cell_seconds(cell):
+    """Seconds a code cell took, from the timestamps nbclient records (None if missing)."""
+    ex = cell.get("metadata", {}).get("execution", {})
+    start, end = ex.get("iopub.execute_input"), ex.get("shell.execute_reply")
+    if not (start and end):
+        return None
+    return (datetime.fromisoformat(end) - datetime.fromisoformat(start)).total_seconds()
+
+
+def time_notebooks(paths, *, timeout=900, progress=_say):
+    """Run each notebook in a fresh ``python3`` kernel from its own folder; one row per notebook.
+
+    Rows: ``notebook``, ``seconds`` (wall, kernel start included), ``slowest_cell`` (index, seconds, first line),
+    ``budget_seconds`` and ``within_budget``. A cell that raises stops the run with a
+    :class:`labutils._cli.CommandError` naming the notebook and the cell.
+    """
+    import nbformat
+    from nbclient import NotebookClient
+    from nbclient.exceptions import CellExecutionError
+
+    rows = []
+    for path in paths:
+        path = Path(path)
+        try:
+            nb = nbformat.read(path, as_version=4)
+        except (OSError, ValueError) as exc:
+            raise _cli.CommandError(f"{path}: cannot read the notebook ({exc})") from None
+        progress(f"{path.name} ...")
+        client = NotebookClient(nb, timeout=timeout, kernel_name="python3",
+                                resources={"metadata": {"path": str(path.parent)}})
+        wall = time.perf_counter()
+        try:
+            client.execute()
+        except CellExecutionError:
+            bad = next(((i, o) for i, c in enumerate(nb.cells) if c.cell_type == "code"
+                        for o in c.get("outputs", []) if o.get("output_type") == "error"), (None, {}))
+            i, err = bad
+            raise _cli.CommandError(f"{path}: cell {i} raised {err.get('ename', 'an error')}: "
+                                    f"{err.get('evalue', '')}") from None
+        wall = time.perf_counter() - wall
+        times = [(i, _cell_seconds(c)) for i, c in enumerate(nb.cells) if c.cell_type == "code"]
+        times = [(i, t) for i, t in times if t is not None]
+        i, t = max(times, key=lambda it: it[1]) if times else (None, 0.0)
+        first = nb.cells[i].source.splitlines()[0][:80] if i is not None and nb.cells[i].source else ""
+        rows.append(dict(notebook=path.name, seconds=round(wall, 1),
+                         slowest_cell=dict(index=i, seconds=round(t, 1), first_line=first),
+                         budget_seconds=NOTEBOOK_BUDGET_S, within_budget=bool(wall < NOTEBOOK_BUDGET_S)))
+        progress(f"{path.name}: {wall:.1f} s")
+    return rows
+
+
 def _parser():
     ap = _cli.Parser(prog="python -m labutils.bench",
                                  description="Benchmarks, printed as one JSON document (never asserted).")
@@ -277,17 +339,32 @@ def _parser():
     size = ba.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_true", help="LM-Schur and scipy-analytic only, <= 200 scipy evaluations")
     size.add_argument("--all", action="store_true", help="also the tight-LSMR scipy variants on ladybug (~20 min each)")
+    nbs = sub.add_parser("notebooks", help="run each notebook in a fresh kernel and time it against the 90 s budget",
+                         description="Run notebooks top to bottom (nothing is saved) and print their seconds, "
+                                     "slowest cell and whether each is within the 90 s budget.")
+    nbs.add_argument("paths", nargs="*", metavar="NOTEBOOK",
+                     help="notebooks to run (default: every notebooks/NN_*.ipynb of the workbook)")
     return ap
 
 
 def main(argv=None):
-    """``python -m labutils.bench ba [--quick | --all]``: progress on stderr, one JSON document on stdout."""
+    """``python -m labutils.bench ba [--quick | --all]`` or ``notebooks [NOTEBOOK ...]``: progress on stderr, one
+    JSON document on stdout."""
     args = _parser().parse_args(argv)
+    machine = dict(cpus=os.cpu_count(), OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS"),
+                   load_average=os.getloadavg())
+    if args.what == "notebooks":
+        paths = [Path(p) for p in args.paths] or sorted(NOTEBOOK_DIR.glob("[0-9][0-9]_*.ipynb"))
+        for p in paths:
+            if not p.is_file():
+                raise _cli.CommandError(f"{p}: no such notebook")
+        rows = time_notebooks(paths)
+        print(json.dumps(dict(machine=machine, notebooks=rows,
+                              total_seconds=round(sum(r["seconds"] for r in rows), 1)), indent=1))
+        return 0
     variants = {"scipy-analytic": SCIPY_VARIANTS["scipy-analytic"]} if args.quick else SCIPY_VARIANTS
     n = 200 if args.quick else 2000
-    out = dict(machine=dict(cpus=os.cpu_count(), OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS"),
-                            load_average=os.getloadavg()),
-               dino=bench_dino(n, variants))
+    out = dict(machine=machine, dino=bench_dino(n, variants))
     try:
         out["ladybug"] = bench_ladybug(n, variants if (args.quick or args.all) else None)
     except FileNotFoundError as exc:

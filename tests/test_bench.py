@@ -1,5 +1,7 @@
 """The benchmark helpers notebook 04 uses (subproblem, time_solvers, time_per_iteration) and the command line's
-refusals. Timings are printed by the benchmark, never asserted here."""
+refusals, and ``bench notebooks`` on tiny notebooks. Timings are printed by the benchmark, never asserted here
+(only that the slowest cell is the one that sleeps)."""
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -69,3 +71,37 @@ def test_command_line_refuses_unknown_arguments():
     r = subprocess.run([sys.executable, "-m", "labutils.bench", "ba", "--fast"], capture_output=True, text=True,
                        cwd=ROOT)
     assert r.returncode == 2 and r.stdout == "" and "--fast" in r.stderr
+
+
+def _notebook(path, *sources):
+    import nbformat
+
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_code_cell(s) for s in sources]
+    nbformat.write(nb, path)
+    return path
+
+
+def test_notebooks_prints_seconds_and_the_slowest_cell(tmp_path):
+    nb = _notebook(tmp_path / "01_t.ipynb", "x = 1", "import time\ntime.sleep(0.3)", "y = x + 1")
+    before = nb.read_bytes()
+    r = subprocess.run([sys.executable, "-m", "labutils.bench", "notebooks", str(nb)], capture_output=True,
+                       text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    row, = json.loads(r.stdout)["notebooks"]
+    assert row["notebook"] == "01_t.ipynb" and row["slowest_cell"]["index"] == 1
+    assert row["slowest_cell"]["first_line"] == "import time" and row["slowest_cell"]["seconds"] >= 0.3
+    assert row["seconds"] >= row["slowest_cell"]["seconds"] and row["within_budget"] is (row["seconds"] < 90)
+    assert nb.read_bytes() == before                                          # nothing saved into the notebook
+
+
+def test_notebooks_names_the_cell_that_raises(tmp_path):
+    nb = _notebook(tmp_path / "bad.ipynb", "x = 1", "1 / 0")
+    r = subprocess.run([sys.executable, "-m", "labutils.bench", "notebooks", str(nb), str(tmp_path / "none.ipynb")],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    assert f"error: {tmp_path / 'none.ipynb'}: no such notebook" in r.stderr          # checked before any is run
+    r = subprocess.run([sys.executable, "-m", "labutils.bench", "notebooks", str(nb)], capture_output=True,
+                       text=True, cwd=tmp_path)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().splitlines()[-1] == f"error: {nb}: cell 1 raised ZeroDivisionError: division by zero"
