@@ -196,8 +196,10 @@ def right_jacobian_so3(w: ArrayLike) -> np.ndarray:
     """Right Jacobian of SO(3), ``J_r(ω) = J_l(-ω) = J_l(ω)ᵀ``: ``exp([ω + δ]×) ≈ exp([ω]×) exp([J_r(ω) δ]×)``.
 
     The same idea as :func:`left_jacobian_so3` with the small rotation applied on the **right** (in the body
-    frame): pose refinement (notebook 03) perturbs ``R = exp([w]×) R0`` one way, bundle adjustment (notebook 04)
-    the other; both are first-order maps from a change of ``ω`` to a small rotation.
+    frame). The two are tied by ``exp([ω]×) J_r(ω) = J_l(ω)``, so the derivative of ``exp([ω]×) Y`` with respect
+    to ``ω`` has two equal forms: ``-[exp([ω]×) Y]× exp([ω]×) J_r(ω)``, as pose refinement writes it
+    (notebook 03, :func:`labutils.pnp.pose_jacobian`), and ``-[exp([ω]×) Y]× J_l(ω)``, as bundle adjustment
+    does (notebook 04, :func:`labutils.reprojection.reprojection_jacobian`).
 
     Examples
     --------
