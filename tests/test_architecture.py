@@ -28,8 +28,9 @@ LAYERS = {
     "precision": ["uncertainty", "noise_study"],
     "the 3D model": ["carving", "carve"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
-    "presentation and tools": ["plotting", "plotting_calibration", "carving_plots", "bench", "exercises",
-                               "notebook_filter"],
+    "dense stereo": ["stereo"],
+    "presentation and tools": ["plotting", "plotting_calibration", "carving_plots", "stereo_plots", "bench",
+                               "exercises", "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]
 
