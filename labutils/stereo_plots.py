@@ -1,27 +1,11 @@
-"""Plots for dense stereo: a rectified pair with its rows, disparity and depth maps, a pixel's score curve, what the
-left–right check removed.
+"""Plots for dense stereo: disparity and depth maps, a pixel's score curve, what the left–right check removed
+(a rectified pair with its rows: :func:`labutils.plotting_calibration.plot_rectified_pair`).
 
 Each helper takes an ``ax`` and returns it; none calls ``plt.show()`` or changes global style.
 """
 import numpy as np
 
-__all__ = ["plot_rectified_pair", "plot_disparity", "plot_score_curve", "plot_check_outcome"]
-
-
-def plot_rectified_pair(ax, image1, image2, n_rows=10, color="c", title=None):
-    """The two rectified images side by side with a few image rows drawn across both: matches lie on them."""
-    image1, image2 = np.asarray(image1), np.asarray(image2)
-    h, w = image1.shape[:2]
-    both = np.concatenate([image1, image2], axis=1)
-    ax.imshow(both, cmap="gray" if both.ndim == 2 else None)
-    for y in np.linspace(0.08 * h, 0.92 * h, n_rows):
-        ax.axhline(y, color=color, lw=0.6, alpha=0.8)
-    ax.axvline(w - 0.5, color="w", lw=1.0)
-    ax.set_xticks([])
-    ax.set_yticks([])
-    if title:
-        ax.set_title(title, fontsize=9)
-    return ax
+__all__ = ["plot_disparity", "plot_score_curve", "plot_check_outcome"]
 
 
 def plot_disparity(ax, disparity, vmin=None, vmax=None, cmap="turbo", title=None, colorbar=True, label="pixels"):

@@ -162,8 +162,9 @@ def _zncc_slices(L, R, disparities, window, min_std):
     muL, muR = box_mean(L, window), box_mean(R, window)
     sdL = np.sqrt(np.maximum(box_mean(L * L, window) - muL ** 2, 0.0))
     sdR = np.sqrt(np.maximum(box_mean(R * R, window) - muR ** 2, 0.0))
-    sdL[~(sdL >= min_std)] = np.nan                       # textureless windows: no score
-    sdR[~(sdR >= min_std)] = np.nan
+    # textureless windows get no score: below min_std, and always where the variance is only rounding error
+    sdL[~(sdL >= min_std) | (sdL <= 1e-6 * (np.abs(muL) + 1))] = np.nan
+    sdR[~(sdR >= min_std) | (sdR <= 1e-6 * (np.abs(muR) + 1))] = np.nan
     for d in disparities:
         x0, x1 = max(d, 0), min(w, w + d)                 # columns x whose x - d is in the image
         z = np.full((h, w), np.nan)

@@ -8,6 +8,10 @@ is kept when at least ``min_agree`` of them hold a depth within a relative toler
 simplest form; Furukawa & Hernández, *Multi-View Stereo: A Tutorial*, 2015, Sec. 4.1). A map that sees something
 nearer along the ray (the point is hidden there) or nothing at all neither confirms nor rejects.
 
+The map's depth where a point projects is interpolated between its four pixels (bilinearly in inverse depth, exact
+on a plane), so that a steep surface, whose depth changes a lot from one pixel to the next, is not rejected for the
+pixel grid's sake.
+
 The surviving points of overlapping maps describe the same surface several times; they are **merged** on a voxel
 grid (points in one cell are averaged, position and colour), which also evens out the density.
 
@@ -34,23 +38,31 @@ def _as_maps(depth_maps, name="depth_maps", min_n=1):
 
 
 def depth_in_map(X: ArrayLike, depth_map: DepthMap) -> tuple[np.ndarray, np.ndarray]:
-    """Each point's depth in a map's camera, and the map's depth at the pixel the point projects to.
+    """Each point's depth in a map's camera, and the map's depth where the point projects.
+
+    The map's depth there is interpolated from the four pixels around the point, bilinearly in **inverse** depth
+    (``1/Z`` is an affine function of the pixel on a plane, so a plane is interpolated exactly, even seen at a
+    grazing angle, where the depth changes a lot from one pixel to the next); where one of the four has no depth,
+    the nearest pixel's depth is taken.
 
     Returns
     -------
     z : (N,) ndarray
         Depth of each point along the camera's z axis.
     z_map : (N,) ndarray
-        The map's depth at the point's nearest pixel; NaN where the point is behind the camera, projects outside the
-        map, or the map has no depth there.
+        The map's depth at the point's pixel; NaN where the point is behind the camera, projects outside the map, or
+        the map has no depth at its nearest pixel.
 
     Examples
     --------
-    >>> dm = DepthMap(np.full((4, 6), 2.0), np.array([[10.0, 0, 2.5], [0, 10, 1.5], [0, 0, 1]]), np.eye(3),
-    ...               np.zeros(3))
+    >>> K = np.array([[10.0, 0, 2.5], [0, 10, 1.5], [0, 0, 1]])
+    >>> dm = DepthMap(np.full((4, 6), 2.0), K, np.eye(3), np.zeros(3))
     >>> z, z_map = depth_in_map([[0.0, 0.0, 2.1], [5.0, 0.0, 1.0]], dm)
     >>> z.tolist(), z_map.tolist()
     ([2.1, 1.0], [2.0, nan])
+    >>> plane = DepthMap(1 / (0.5 + 0.01 * np.arange(6)) * np.ones((4, 1)), K, np.eye(3), np.zeros(3))
+    >>> float(depth_in_map([[0.0, 0.0, 1.0]], plane)[1][0] * (0.5 + 0.01 * 2.5))      # between pixels, exactly
+    1.0
     """
     X = as_points(X, "X", dim=3, min_n=0)
     if not isinstance(depth_map, DepthMap):
@@ -59,18 +71,30 @@ def depth_in_map(X: ArrayLike, depth_map: DepthMap) -> tuple[np.ndarray, np.ndar
     z = xc[:, 2]
     h, w = depth_map.shape
     z_map = np.full(len(X), np.nan)
-    front = z > 0
     with np.errstate(divide="ignore", invalid="ignore"):
         u = xc @ depth_map.K.T
-        col = np.floor(u[:, 0] / u[:, 2] + 0.5)
-        row = np.floor(u[:, 1] / u[:, 2] + 0.5)
-    ok = front & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        x, y = u[:, 0] / u[:, 2], u[:, 1] / u[:, 2]
+        col, row = np.floor(x + 0.5), np.floor(y + 0.5)
+    ok = (z > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
     z_map[ok] = depth_map.depth[row[ok].astype(int), col[ok].astype(int)]
+    # bilinear in 1/Z where the four pixels around the point all have a depth
+    x0, y0 = np.floor(x), np.floor(y)
+    inner = ok & (x0 >= 0) & (x0 < w - 1) & (y0 >= 0) & (y0 < h - 1)
+    c0, r0 = x0[inner].astype(int), y0[inner].astype(int)
+    fx, fy = (x - x0)[inner], (y - y0)[inner]
+    D = depth_map.depth
+    corners = np.stack([D[r0, c0], D[r0, c0 + 1], D[r0 + 1, c0], D[r0 + 1, c0 + 1]])
+    weights = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
+    full = np.all(np.isfinite(corners), axis=0)
+    inv = np.sum(weights[:, full] / corners[:, full], axis=0)
+    idx = np.flatnonzero(inner)[full]
+    z_map[idx] = 1.0 / inv
     return z, z_map
 
 
 def depth_agreement(X: ArrayLike, depth_maps: Sequence[DepthMap], rel_tol: float = 0.01) -> np.ndarray:
-    """How many of ``depth_maps`` confirm each point: ``|z - z_map| <= rel_tol · z_map`` at its pixel.
+    """How many of ``depth_maps`` confirm each point: ``|z - z_map| <= rel_tol · z_map`` where it projects
+    (:func:`depth_in_map`).
 
     Returns
     -------

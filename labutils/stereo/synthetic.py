@@ -180,6 +180,24 @@ class SphereScene:
         X = np.asarray(X, float).reshape(-1, 3)
         return np.min(np.linalg.norm(X[:, None] - self.spheres[None, :, :3], axis=2) - self.spheres[:, 3], axis=1)
 
+    def visible(self, X: ArrayLike, rel_tol: float = 1e-3) -> np.ndarray:
+        """(V, N) bool: which views see each point — it projects into the image and the true depth at its pixel is
+        its own depth (within ``rel_tol`` relative, plus two pixels' footprint for the slope across a pixel), so
+        nothing nearer hides it. Meant for points on the surface."""
+        X = np.asarray(X, float).reshape(-1, 3)
+        h, w = self.depths.shape[1:]
+        out = np.zeros((self.n_views, len(X)), bool)
+        for v in range(self.n_views):
+            xc = X @ self.R[v].T + self.t[v]
+            u = xc @ self.K[v].T
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c, r = np.floor(u[:, 0] / u[:, 2] + 0.5), np.floor(u[:, 1] / u[:, 2] + 0.5)
+            ok = (xc[:, 2] > 0) & (c >= 0) & (c < w) & (r >= 0) & (r < h)
+            z = self.depths[v][r[ok].astype(int), c[ok].astype(int)]
+            with np.errstate(invalid="ignore"):
+                out[v, ok] = np.abs(z - xc[ok, 2]) <= rel_tol * xc[ok, 2] + 2 * xc[ok, 2] / self.K[v, 0, 0]
+        return out
+
     def surface_points(self, n: int, *, rng: np.random.Generator) -> np.ndarray:
         """(n, 3) random points on the visible surface: on a sphere, outside every other sphere, above the lowest."""
         rng = as_rng(rng)
