@@ -48,8 +48,10 @@ def _diagnose_zncc(v, a, b):
          "its default ddof=0, or sums throughout)"),
         ((da * db).sum() / ((da * da).sum() * (db * db).sum()), "take the square root of the product of the sums "
                                                                  "of squares"),
-        (ref ** 2, "you squared the score: a negative correlation must stay negative"),
-        (abs(ref), "you took the absolute value: a negative correlation (an inverted window) must stay negative"),
+        (ref ** 2, "you squared the score (or took its absolute value): a negative correlation (an inverted window) "
+                   "must stay negative"),
+        (abs(ref), "you took the absolute value (or squared the score): a negative correlation (an inverted window) "
+                   "must stay negative"),
     ]
     for value, hint in variants:
         if np.isfinite(value) and abs(v - value) < 1e-9:
