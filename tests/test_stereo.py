@@ -1,5 +1,7 @@
 """Dense stereo (labutils.stereo): shapes and bad input, invariants, recovery on scenes with exact truth, OpenCV as the
 reference (box filter, SGBM), and the real temple and dinosaur where the data is present."""
+import inspect
+
 import cv2
 import numpy as np
 import pytest
@@ -484,3 +486,56 @@ def test_dino_disparities_match_the_real_tracks(dino):
     ok = np.isfinite(d_est)
     err = np.abs(d_est - d_true)[ok]
     assert ok.mean() > 0.8 and np.mean(err <= 1) > 0.9 and np.median(err) < 0.3
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# a sweep of bad input, the way tests/test_api_sweep.py sweeps the top-level API
+# ---------------------------------------------------------------------------------------------------------------
+def _sweep_calls():
+    lay = make_layered_pair(rng=np.random.default_rng(0), image_size=(40, 30), d_layers=(9,))
+    K, R1, t1, R2, t2, img = _random_pair()
+    pair = rectify_pair(img, img, K, R1, t1, K, R2, t2)
+    d = np.full(img.shape[:2], 30.0)
+    dm = depth_map_from_disparity(d, pair)
+    X = np.array([[0.1, 0.2, 0.3], [0.0, 0.0, 0.0], [0.1, -0.1, 0.2]])
+    valid = {
+        box_mean: (lay.disparity_left, 3),
+        zncc: (np.arange(9.0).reshape(3, 3), np.arange(9.0).reshape(3, 3) ** 2),
+        zncc_volume: (lay.left, lay.right, np.array([1, 2])),
+        disparity_plane_sweep: (lay.left, lay.right, 0, 12),
+        left_right_check: (lay.disparity_left, lay.disparity_right, 1.0),
+        scale_intrinsics: (K, 0.5),
+        rectify_pair: (img, img, K, R1, t1, K, R2, t2),
+        disparity_range: (pair, X),
+        depth_from_disparity: (d, 300.0, 0.5),
+        depth_map_from_disparity: (d, pair),
+        ring_pairs: (np.stack([R1, R2]), np.stack([t1, t2]), np.zeros(3)),
+        depth_in_map: (X, dm),
+        merge_points: (X, 0.1),
+    }
+    for fn, args in valid.items():
+        params = list(inspect.signature(fn).parameters)
+        for k, v in enumerate(args):
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                bad = [("nan", float("nan")), ("string", "three")]
+            elif isinstance(v, np.ndarray):
+                b = v.astype(float).copy()
+                b.flat[1] = np.nan
+                bad = [("string", "not an array"), ("ragged", [[1.0], [1.0, 2.0]])]
+                if v.dtype.kind == "f" and not (fn in (depth_from_disparity, depth_map_from_disparity) and k == 0
+                                                 or fn is left_right_check and k < 2):
+                    bad.append(("nan", b))                # NaN marks "no disparity" in a disparity map: allowed
+            else:
+                continue
+            for kind, value in bad:
+                yield pytest.param(fn, args[:k] + (value,) + args[k + 1:], params[k], id=f"{fn.__name__}-{params[k]}-"
+                                                                                        f"{kind}")
+
+
+@pytest.mark.parametrize("fn, args, name", list(_sweep_calls()))
+def test_bad_input_raises_a_value_error_naming_the_argument(fn, args, name):
+    with pytest.raises(ValueError) as info:
+        fn(*args)
+    message = str(info.value)
+    aliases = {"d_min": "d_max", "patch2": "patch1", "image2": "image1", "f": "f", "scale": "scale"}
+    assert name in message or aliases.get(name, name) in message, message

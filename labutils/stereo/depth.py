@@ -48,7 +48,10 @@ def scale_intrinsics(K: ArrayLike, scale: float) -> np.ndarray:
 
 
 def _as_colour_image(image, name):
-    a = np.asarray(image)
+    try:
+        a = np.asarray(image)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an (h, w) or (h, w, 3) uint8 image (an array)") from None
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or a.dtype != np.uint8 or min(a.shape[:2]) < 2:
         raise ValueError(f"{name} must be an (h, w) or (h, w, 3) uint8 image; got shape {a.shape} and dtype {a.dtype}")
     return a
@@ -294,10 +297,13 @@ def depth_map_from_disparity(disparity: ArrayLike, pair: RectifiedPair) -> Depth
     """
     if not isinstance(pair, RectifiedPair):
         raise ValueError(f"pair must be a RectifiedPair (from rectify_pair); got {type(pair).__name__}")
-    d = np.asarray(disparity, dtype=float) if np.ndim(disparity) == 2 else None
+    try:
+        d = np.asarray(disparity, dtype=float)
+    except (TypeError, ValueError):
+        d = None
     if d is None or d.shape != pair.image1.shape[:2]:
-        raise ValueError(f"disparity must be an (h, w) map of the pair's size {pair.image1.shape[:2]}; got shape "
-                         f"{np.shape(disparity)}")
+        got = "a ragged or non-numeric input" if d is None else f"shape {d.shape}"
+        raise ValueError(f"disparity must be an (h, w) map of the pair's size {pair.image1.shape[:2]}; got {got}")
     Z = depth_from_disparity(d, pair.f, pair.baseline)
     return DepthMap(Z, pair.K.copy(), pair.R.copy(), pair.t.copy(), pair.image1)
 

@@ -94,9 +94,14 @@ def box_mean(image: ArrayLike, window: int) -> np.ndarray:
            [nan, nan, nan, nan]])
     """
     k = _as_radius(window)
-    a = np.asarray(image, dtype=float)
+    try:
+        a = np.asarray(image, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError("image must be a numeric (h, w) array") from None
     if a.ndim != 2:
         raise ValueError(f"image must have shape (h, w); got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError("image has non-finite values (NaN or inf): they would spread through the integral image")
     h, w = a.shape
     out = np.full((h, w), np.nan)
     if h < window or w < window:
@@ -125,7 +130,10 @@ def zncc(patch1: ArrayLike, patch2: ArrayLike) -> float:
     >>> round(zncc(a, 3 * a + 7), 12), round(zncc(a, -a), 12)
     (1.0, -1.0)
     """
-    a, b = np.asarray(patch1, dtype=float), np.asarray(patch2, dtype=float)
+    try:
+        a, b = np.asarray(patch1, dtype=float), np.asarray(patch2, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError("patch1 and patch2 must be numeric arrays of the same shape") from None
     if a.shape != b.shape or a.size < 2:
         raise ValueError(f"patch1 and patch2 must have the same shape with at least 2 pixels; got {a.shape} and "
                          f"{b.shape}")
