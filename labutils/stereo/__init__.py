@@ -32,8 +32,10 @@ from .depth import (
 )
 from .disparity import as_grey, box_mean, disparity_plane_sweep, left_right_check, zncc, zncc_volume
 from .fusion import FusedCloud, depth_agreement, depth_in_map, fuse_depth_maps, merge_points
+from .synthetic import LayeredPair, SphereScene, make_layered_pair, make_textured_spheres
 
 __all__ = ["as_grey", "box_mean", "zncc", "zncc_volume", "disparity_plane_sweep", "left_right_check",
            "RectifiedPair", "rectify_pair", "scale_intrinsics", "disparity_range", "depth_from_disparity", "DepthMap",
            "depth_map_from_disparity", "stereo_depth_map", "ring_pairs", "FusedCloud", "depth_in_map",
-           "depth_agreement", "merge_points", "fuse_depth_maps"]
+           "depth_agreement", "merge_points", "fuse_depth_maps", "LayeredPair", "make_layered_pair", "SphereScene",
+           "make_textured_spheres"]
