@@ -93,7 +93,7 @@ def remap_grid(K, dist, image_size, H=None, out_size=None):
     invalid |= (xn ** 2).sum(1) > _fold_radius(dist) ** 2
     xn[invalid] = 0.0
     xd = distort(xn, dist)
-    src = xd * [K[0, 0], K[1, 1]] + K[:2, 2]
+    src = xd @ K[:2, :2].T + K[:2, 2]                  # K's skew too (the dinosaur's is -78.6)
     src[invalid] = -1e4
     return src[:, 0].reshape(h, w).astype(np.float32), src[:, 1].reshape(h, w).astype(np.float32)
 

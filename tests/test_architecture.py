@@ -29,9 +29,9 @@ LAYERS = {
     "precision": ["uncertainty", "noise_study"],
     "the 3D model": ["carving", "carve", "textured_scene", "meshing", "texturing"],
     "calibration": ["lens", "zhang", "levenberg_marquardt", "calibration", "chessboard", "rectification", "calibrate"],
+    "dense stereo": ["stereo"],
     "presentation and tools": ["plotting", "plotting_calibration", "plotting_matches", "plotting_views",
-                               "carving_plots", "bench", "exercises",
-                               "notebook_filter"],
+                               "carving_plots", "stereo_plots", "bench", "exercises", "notebook_filter"],
 }
 ORDER = [m for layer in LAYERS.values() for m in layer]
 

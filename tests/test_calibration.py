@@ -242,6 +242,15 @@ def test_remap_grid_undoes_the_distortion():
     assert np.abs(back - u).max() < 1e-3
 
 
+
+def test_remap_grid_keeps_the_skew():
+    """A skewed K (the dinosaur's is -78.6) with no distortion and no H: every output pixel samples itself. A map
+    built from fx and fy alone shifts a pixel by skew · y_n (tens of pixels here)."""
+    K = np.array([[3217.0, -78.6, 289.9], [0, 2292.0, -1070.0], [0, 0, 1]])
+    mx, my = remap_grid(K, np.zeros(5), (720, 576))
+    u, v = np.meshgrid(np.arange(720.0), np.arange(576.0))
+    assert np.abs(mx - u).max() < 1e-3 and np.abs(my - v).max() < 1e-3
+
 # --- recovery of synthetic truth --------------------------------------------------------------------------------
 
 def test_noise_free_views_give_the_truth_exactly(rng):
