@@ -287,8 +287,11 @@ def _cell_seconds(cell):
     return (datetime.fromisoformat(end) - datetime.fromisoformat(start)).total_seconds()
 
 
-def time_notebooks(paths, *, timeout=900, progress=_say):
+def time_notebooks(paths, *, timeout=900, keep=None, progress=_say):
     """Run each notebook in a fresh ``python3`` kernel from its own folder; one row per notebook.
+
+    With ``keep`` (a folder), the executed copy of each notebook, outputs included, is written there under its own
+    name; the notebooks themselves are never written.
 
     Rows: ``notebook``, ``seconds`` (wall, kernel start included), ``slowest_cell`` (index, seconds, first line),
     ``budget_seconds`` and ``within_budget``. A cell that raises stops the run with a
@@ -318,6 +321,8 @@ def time_notebooks(paths, *, timeout=900, progress=_say):
             raise _cli.CommandError(f"{path}: cell {i} raised {err.get('ename', 'an error')}: "
                                     f"{err.get('evalue', '')}") from None
         wall = time.perf_counter() - wall
+        if keep is not None:
+            _cli.write_atomically(Path(keep) / path.name, nbformat.writes(nb).encode())
         times = [(i, _cell_seconds(c)) for i, c in enumerate(nb.cells) if c.cell_type == "code"]
         times = [(i, t) for i, t in times if t is not None]
         i, t = max(times, key=lambda it: it[1]) if times else (None, 0.0)
@@ -344,6 +349,8 @@ def _parser():
                                      "slowest cell and whether each is within the 90 s budget.")
     nbs.add_argument("paths", nargs="*", metavar="NOTEBOOK",
                      help="notebooks to run (default: every notebooks/NN_*.ipynb of the workbook)")
+    nbs.add_argument("--keep", type=Path, metavar="DIR",
+                     help="also write each executed notebook, with its outputs, into DIR (not the notebooks' folder)")
     return ap
 
 
@@ -358,7 +365,12 @@ def main(argv=None):
         for p in paths:
             if not p.is_file():
                 raise _cli.CommandError(f"{p}: no such notebook")
-        rows = time_notebooks(paths)
+        if args.keep is not None:
+            if not args.keep.is_dir():
+                raise _cli.CommandError(f"{args.keep}: no such folder (--keep)")
+            if any(args.keep.resolve() == p.resolve().parent for p in paths):
+                raise _cli.CommandError(f"{args.keep}: --keep must not be the notebooks' own folder")
+        rows = time_notebooks(paths, keep=args.keep)
         print(json.dumps(dict(machine=machine, notebooks=rows,
                               total_seconds=round(sum(r["seconds"] for r in rows), 1)), indent=1))
         return 0

@@ -93,6 +93,16 @@ def test_notebooks_prints_seconds_and_the_slowest_cell(tmp_path):
     assert row["slowest_cell"]["first_line"] == "import time" and row["slowest_cell"]["seconds"] >= 0.3
     assert row["seconds"] >= row["slowest_cell"]["seconds"] and row["within_budget"] is (row["seconds"] < 90)
     assert nb.read_bytes() == before                                          # nothing saved into the notebook
+    (tmp_path / "out").mkdir()
+    r = subprocess.run([sys.executable, "-m", "labutils.bench", "notebooks", str(nb), "--keep", "out"],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    kept = json.loads((tmp_path / "out" / "01_t.ipynb").read_text())
+    assert [c["execution_count"] for c in kept["cells"]] == [1, 2, 3] and nb.read_bytes() == before
+    for keep in ("missing", "."):                                             # no folder; the notebook's own
+        r = subprocess.run([sys.executable, "-m", "labutils.bench", "notebooks", str(nb), "--keep", keep],
+                           capture_output=True, text=True, cwd=tmp_path)
+        assert r.returncode == 2 and r.stdout == "" and r.stderr.startswith(f"error: {keep}: ")
 
 
 def test_notebooks_names_the_cell_that_raises(tmp_path):
