@@ -313,7 +313,7 @@ def global_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, thr
     R[~reg], t[~reg] = np.nan, np.nan
     rec = Reconstruction(R=R, t=t, registered=reg.copy(), X=X, inliers=inliers, order=[], K=Ks, timings=timings,
                          log=log)
-    note(rec.summary())
+    note(f"global start, before the last stage: {rec.summary()}")
     return rec
 
 

@@ -390,7 +390,6 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
                       note=note, timings=timings, **ba)
     timings["total"] = time.perf_counter() - t_start
     rec = _result(st, order, timings, log)
-    note(rec.summary())
     rec.log = log
     return rec
 

@@ -126,8 +126,8 @@ def test_sfm_summary_once_progress_on_stderr_and_modes(tracks_and_K):
     d = tracks_and_K
     proc = run("sfm", "tracks.txt", "K.txt", "--out", "r.json", "--ply", "p.ply", cwd=d)
     assert proc.returncode == 0, proc.stderr
-    summary = [line for line in proc.stdout.splitlines() if "views registered" in line]
-    assert len(summary) == 1, proc.stdout                      # the summary line once, on stdout
+    summary = [line for line in (proc.stdout + proc.stderr).splitlines() if "views registered" in line]
+    assert len(summary) == 1 and summary[0] in proc.stdout, proc.stdout   # the summary once, on stdout
     assert "initial pair" in proc.stderr                        # the progress log on stderr
     for f in ("r.json", "p.ply"):
         assert oct((d / f).stat().st_mode & 0o777) == oct(0o666 & ~_umask())
