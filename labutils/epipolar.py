@@ -90,19 +90,23 @@ def hartley_normalisation(x: ArrayLike) -> np.ndarray:
     Raises
     ------
     ValueError
-        If all points coincide.
+        If ``x`` is not an ``(N, 2)`` finite array with N >= 2, or all its points coincide.
 
     Examples
     --------
     >>> T = hartley_normalisation([[0., 0.], [2., 0.]])
     >>> T @ [2., 0., 1.]
     array([1.41421356, 0.        , 1.        ])
+    >>> hartley_normalisation([[1., 2.]])
+    Traceback (most recent call last):
+    ...
+    ValueError: x has 1 points; at least 2 are needed
     """
-    x = np.asarray(x, float)
+    x = as_points(x, "x", min_n=2)
     c = x.mean(0)
     d = np.sqrt(((x - c) ** 2).sum(1)).mean()
     if not d > 1e-12 * max(1.0, np.abs(c).max()):
-        raise ValueError("all points coincide: they cannot be normalised (degenerate configuration)")
+        raise ValueError("all points of x coincide: they cannot be normalised (degenerate configuration)")
     s = np.sqrt(2) / d
     return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1]])
 

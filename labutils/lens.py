@@ -12,7 +12,7 @@ A point ``x_cam`` in the camera frame is seen at
 """
 import numpy as np
 
-from ._validation import as_calibration, as_matrix, as_points
+from ._validation import as_array, as_calibration, as_matrix, as_points
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
@@ -27,7 +27,7 @@ def as_distortion(dist, name="dist"):
     >>> as_distortion([0.1, 0.0, 0.0, 0.0])
     array([0.1, 0. , 0. , 0. , 0. ])
     """
-    d = np.asarray(dist, dtype=float).ravel() if dist is not None else np.zeros(5)
+    d = as_array(dist, name, "(5,)").ravel() if dist is not None else np.zeros(5)
     if d.size == 4:
         d = np.r_[d, 0.0]
     if d.shape != (5,):

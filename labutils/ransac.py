@@ -9,6 +9,9 @@ from ._validation import as_count, as_fraction, as_positive, as_probability_open
 def ransac_iterations(inlier_ratio: float, sample_size: int, confidence: float) -> int:
     """Trials needed to draw one all-inlier sample with probability ``confidence`` (H&Z eq. 4.18).
 
+    With no inliers (``inlier_ratio ** sample_size == 0``) no number of trials is enough: the result is then the
+    largest int64, so that a RANSAC loop runs on to its ``max_iter``.
+
     >>> ransac_iterations(0.5, 8, 0.99)
     1177
     >>> ransac_iterations(0.5, 8, 1.0)

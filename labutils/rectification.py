@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ._validation import as_matrix, as_points, as_rotation
+from ._validation import as_array, as_matrix, as_points, as_rotation
 from .lens import as_distortion, as_intrinsics, distort, undistort_points
 
 __all__ = ["remap_grid", "undistort_image", "Rectification", "rectify_fusiello", "rectify_points", "rectify_image"]
@@ -188,7 +188,7 @@ def rectify_fusiello(K1, K2, R, t, image_size=None):
     """
     K1, K2 = as_intrinsics(K1, "K1"), as_intrinsics(K2, "K2")
     R = as_rotation(R, "R")
-    t = as_matrix(np.asarray(t, float).reshape(-1), "t", (3,))
+    t = as_matrix(as_array(t, "t", "(3,)").reshape(-1), "t", (3,))
     C2 = -R.T @ t
     baseline = float(np.linalg.norm(C2))
     if baseline <= 1e-12 * max(1.0, np.abs(t).max()):

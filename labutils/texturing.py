@@ -349,6 +349,9 @@ def texture_vertices(views: VertexViews, *, method: str = "frontal", exclude: Se
         raise ValueError(f"views must be a VertexViews (from vertex_views); got {type(views).__name__}")
     if method not in ("frontal", "visible", "average"):
         raise ValueError(f"method must be 'frontal', 'visible' or 'average'; got {method!r}")
+    fill_rgb = as_array(fill, "fill", "(3,)")
+    if fill_rgb.shape != (3,) or not np.all((fill_rgb >= 0) & (fill_rgb <= 255)):
+        raise ValueError(f"fill must be an RGB colour, 3 numbers in 0..255; got {fill!r}")
     use = np.ones(views.n_views, bool)
     for v in exclude:
         if not (isinstance(v, (int, np.integer)) and 0 <= v < views.n_views):
@@ -369,7 +372,7 @@ def texture_vertices(views: VertexViews, *, method: str = "frontal", exclude: Se
         seen = mask.any(axis=0)
     out = np.empty((n, 3), np.uint8)
     out[seen] = np.clip(np.round(col[seen]), 0, 255)
-    out[~seen] = np.asarray(fill, np.uint8)
+    out[~seen] = np.round(fill_rgb).astype(np.uint8)
     return VertexTexture(out, view, seen)
 
 

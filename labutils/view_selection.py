@@ -63,7 +63,7 @@ def pyramid_score(x: ArrayLike, extent: ArrayLike, levels: int = PYRAMID_LEVELS)
     >>> pyramid_score([[10, 10], [90, 90]], (100, 100), levels=2), pyramid_score([[10, 10], [12, 12]], (100, 100), 2)
     (12.0, 6.0)
     """
-    x = np.asarray(x, float)
+    x = as_array(x, "x", "(N, 2)")
     x = np.zeros((0, 2)) if x.size == 0 else as_points(x, "x")
     box = _as_extent(extent)
     levels = as_count(levels, "levels", 1)
@@ -315,8 +315,10 @@ def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigm
 # The initial pair
 # ---------------------------------------------------------------------------------------------
 
-def covisibility(tracks):
+def covisibility(tracks: ArrayLike) -> np.ndarray:
     """(V, V) int: how many tracks each pair of views shares (the diagonal: tracks seen by each view).
+
+    ``tracks`` is a ``(V, T, 2)`` array, NaN where unseen, V >= 1 (:func:`labutils._validation.as_tracks`).
 
     >>> x = np.full((3, 2, 2), np.nan); x[:, 0] = 1.0; x[:2, 1] = 2.0
     >>> covisibility(x)
@@ -324,7 +326,7 @@ def covisibility(tracks):
            [2, 2, 1],
            [1, 1, 1]])
     """
-    seen = np.all(np.isfinite(np.asarray(tracks, float)), axis=-1).astype(np.int64)
+    seen = np.all(np.isfinite(as_tracks(tracks, "tracks", min_views=1)), axis=-1).astype(np.int64)
     return seen @ seen.T
 
 

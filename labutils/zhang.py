@@ -3,7 +3,7 @@ view's pose (Z. Zhang, "A flexible new technique for camera calibration", IEEE P
 H&Z Sec. 8.5 and 8.8)."""
 import numpy as np
 
-from ._validation import as_matrix, as_points
+from ._validation import as_array, as_matrix, as_points
 from .epipolar import homography_dlt
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -98,7 +98,7 @@ def intrinsics_from_homographies(Hs, *, zero_skew=False, equal_focal=False, imag
     >>> np.allclose(intrinsics_from_homographies(Hs), K0)
     True
     """
-    Hs = np.asarray(Hs, dtype=float)
+    Hs = as_array(Hs, "Hs", "(V, 3, 3)")
     if Hs.ndim != 3 or Hs.shape[1:] != (3, 3):
         raise ValueError(f"Hs must have shape (V, 3, 3); got shape {Hs.shape}")
     if not np.all(np.isfinite(Hs)):

@@ -8,6 +8,7 @@ whose message names the argument — never a plausible result, a silent NaN, or 
 reason. Degenerate geometry is swept in ``test_degenerate_geometry``.
 """
 import inspect
+import pkgutil
 import re
 
 import numpy as np
@@ -15,6 +16,9 @@ import pytest
 
 import labutils as lu
 from labutils.bal import BALProblem
+from labutils.chessboard import synthetic_board_views
+from labutils.features import Features
+from labutils.lens import project_points
 from labutils.scene import observations
 
 S = lu.make_scene(40, 4, noise_px=0.5, rng=np.random.default_rng(0))
@@ -29,6 +33,36 @@ REC = lu.incremental_sfm(T.tracks, T.K, rng=np.random.default_rng(0))
 CIT, PIT, _ = observations(T.x_true)
 P3 = S.X[:3]
 x3 = lu.project(S.P[0], P3)
+
+# the extensions: tiny scenes, so that the whole sweep stays cheap
+PAIRS = np.array([[0, 1], [1, 2], [2, 3], [0, 3]])
+R_REL = S.R[PAIRS[:, 1]] @ np.swapaxes(S.R[PAIRS[:, 0]], 1, 2)
+DESC = np.random.default_rng(4).normal(size=(40, 16)).astype(np.float32)      # one descriptor per scene point
+FEATS = [Features(S.x_meas[v], DESC + 0.01 * np.random.default_rng(5 + v).normal(size=DESC.shape).astype(np.float32),
+                  image_size=(720, 576)) for v in range(4)]
+VIEW_PAIRS = np.array([[0, 1], [1, 2], [2, 3]])
+MATCHED = lu.match_views(FEATS, VIEW_PAIRS, rng=np.random.default_rng(0))
+BLOCKS = (np.random.default_rng(7).uniform(size=(12, 16)) > 0.5).astype(np.uint8) * 255
+TEXTURE = np.kron(BLOCKS, np.ones((4, 4), np.uint8))                   # 48 x 64, black and white blocks: corners
+DIST = np.array([-0.2, 0.05, 0.001, -0.001, 0.0])
+XN = np.random.default_rng(6).uniform(-0.4, 0.4, (10, 2))
+BV = synthetic_board_views(np.random.default_rng(0), n_views=4, noise_px=0.0, board=(5, 4))
+OBJ = [BV.X] * 4
+R_RIG, T_RIG = lu.rotation_from_angle_axis([0.0, 0.05, 0.0]), np.array([-0.1, 0.0, 0.0])
+X_RIG = [project_points(BV.X, BV.K, BV.dist, R_RIG @ R, R_RIG @ t + T_RIG) for R, t in zip(BV.R, BV.t)]
+CAL1 = lu.calibrate_camera(OBJ, BV.x_true, BV.image_size)
+CAL2 = lu.calibrate_camera(OBJ, X_RIG, BV.image_size)
+HS = np.stack([lu.board_homography(BV.X, x) for x in BV.x_true])
+IMG = np.full((40, 40, 3), (40, 60, 200), np.uint8)
+IMG[15:25, 15:25] = (230, 120, 20)
+BG = lu.background_model([IMG, IMG])
+BALL = np.array([[np.cos(a) * np.sin(b), np.sin(a) * np.sin(b), np.cos(b)]            # points on a unit sphere
+                 for a in np.linspace(0, 2 * np.pi, 8, endpoint=False) for b in np.linspace(0.3, 2.8, 6)])
+MESH = lu.delaunay_mesh(BALL, max_edge=10.0)
+RB = np.stack([lu.rotation_from_angle_axis([0.0, a, 0.0]) for a in (0.0, 2.1, 4.2)])
+TB = np.array([[0.0, 0.0, 4.0]] * 3)                                      # three cameras around the ball
+KB = np.array([[30.0, 0, 20], [0, 30, 20], [0, 0, 1]])
+VV = lu.vertex_views(MESH.vertices, MESH.faces, KB, RB, TB, [IMG] * 3)
 
 
 def rng():
@@ -94,6 +128,35 @@ VALID = {
     "triangulate_tracks": ((S.x_meas, np.stack([S.K] * 4), S.R, S.t, np.arange(4), S.visible),
                            {"threshold_px": 4.0, "min_angle_deg": 1.0}),
     "up_to_sign_scale": ((F, -2 * F), {}),
+    # the extensions
+    "gric_model_selection": ((X1, X2), {"sigma_px": 0.5}),
+    "homography_dlt": ((X1, X2), {}),
+    "hartley_normalisation": ((X1,), {}),
+    "schur_step": ((CP, S.X, CI, PI, XY, S.K), {"mu": 1e-3}),
+    "choose_initial_pair": ((T.tracks, T.K), {"rng": "RNG"}),
+    "covisibility": ((T.tracks,), {}),
+    "pyramid_score": ((X1, np.array([720.0, 576.0])), {"levels": 4}),
+    "pose_covariance": ((S.X, S.K, S.R[0], S.t[0]), {"sigma_px": 0.5}),
+    "chordal_rotation_averaging": ((PAIRS, R_REL, 4), {}),
+    "ransac_iterations": ((0.5, 8, 0.99), {}),
+    "match_descriptors": ((DESC, FEATS[1].descriptors), {"ratio": 0.8}),
+    "match_views": ((FEATS, VIEW_PAIRS), {"rng": "RNG", "K": S.K}),
+    "tracks_from_matches": ((FEATS, MATCHED), {"verify_px": 2.0}),
+    "detect_features": ((TEXTURE,), {"scale": 0.5, "n_features": 50, "contrast_threshold": 0.04}),
+    "distort": ((XN, DIST), {}),
+    "undistort_points": ((lu.project(S.P[0], S.X), S.K, DIST), {}),
+    "board_homography": ((BV.X, BV.x_true[0]), {}),
+    "intrinsics_from_homographies": ((HS,), {}),
+    "calibrate_camera": ((OBJ, BV.x_true, BV.image_size), {}),
+    "calibrate_stereo": ((OBJ, BV.x_true, X_RIG, CAL1, CAL2), {}),
+    "rectify_fusiello": ((S.K, S.K, R_RIG, T_RIG), {"image_size": (720, 576)}),
+    "background_model": (([IMG, IMG],), {"border_px": 4}),
+    "silhouette": ((IMG, BG), {"threshold": 2.5}),
+    "estimate_normals": ((BALL,), {"k": 8}),
+    "oriented_point_cloud": ((T.X, T.K, T.R, T.t, T.visible), {"k": 8}),
+    "delaunay_mesh": ((BALL,), {"edge_factor": 8.0}),
+    "vertex_views": ((MESH.vertices, MESH.faces, KB, RB, TB, [IMG] * 3), {}),
+    "texture_vertices": ((VV,), {"fill": (128, 128, 128)}),
 }
 
 # Public names not swept here, and why.
@@ -106,6 +169,11 @@ NOT_SWEPT = {
     "load_scene": "passes its keywords to make_scene (swept)", "read_bal": "files: tested in test_bal",
     "write_bal": "files: tested in test_bal (write_bal checks the problem first)",
     "run_noise_study": "a harness of callables; its checks are tested in test_uncertainty",
+    "ModelSelection": "a result record", "SchurStep": "a result record", "RotationAveragingResult": "a result record",
+    "CalibrationResult": "a result record", "PointCloud": "a record", "VoxelGrid": "a record",
+    "Carving": "a result record",
+    "read_ply": "files: tested in test_ply", "write_points": "files: tested in test_ply (test_write_points_bad_input)",
+    "write_mesh": "files: tested in test_ply (test_write_mesh_bad_faces)",
 }
 
 # (function, argument, mutation) -> why a successful call is right there.
@@ -130,6 +198,35 @@ ACCEPTED = {
     ("bundle_from_cameras", "t", "nan"): "a NaN row leaves that camera out (documented)",
     ("bundle_from_cameras", "tracks", "nan"): "NaN marks an unseen observation (here a second NaN in an unseen one)",
     ("incremental_sfm", "tracks", "nan"): "NaN marks an unseen observation (here a second NaN in an unseen one)",
+    ("choose_initial_pair", "tracks", "nan"): "NaN marks an unseen observation (here a second NaN in an unseen one)",
+    ("covisibility", "tracks", "nan"): "NaN marks an unseen observation (here a second NaN in an unseen one)",
+    ("covisibility", "tracks", "one_row"): "one view: the 1 x 1 count of the tracks it sees",
+    ("pyramid_score", "x", "one_row"): "one point fills one cell per level (the docstring's example)",
+    ("pyramid_score", "x", "empty"): "no points score 0 (documented: N may be 0)",
+    ("ransac_iterations", "inlier_ratio", "zero"): "no inliers: no number of trials is enough; the largest int64 "
+                                                   "(documented) lets a RANSAC loop run on to max_iter",
+    ("detect_features", "image", "transposed"): "a transposed image is an image (of the scene turned)",
+    ("detect_features", "image", "drop_column"): "an image one column narrower is an image",
+    ("detect_features", "image", "one_row"): "an image one pixel high is an image (without keypoints)",
+    ("detect_features", "n_features", "zero"): "0 keeps every keypoint (documented)",
+    ("detect_features", "contrast_threshold", "zero"): "0 keeps every extremum (the weakest threshold, as in OpenCV)",
+    ("match_descriptors", "d1", "one_row"): "one descriptor has one nearest neighbour: at most one match",
+    ("match_descriptors", "d1", "empty"): "no descriptors (a blank image, detect_features' example): no matches",
+    ("match_descriptors", "d2", "one_row"): "one candidate has no second neighbour to refuse a match by ratio; the "
+                                            "mutual check keeps at most one match",
+    ("match_descriptors", "d2", "empty"): "no descriptors in image 2: no matches",
+    ("match_views", "pairs", "one_row"): "one pair of views is a valid list of pairs",
+    ("match_views", "pairs", "empty"): "no pairs to match: an empty MatchResult (no row in its table)",
+    ("distort", "xn", "one_row"): "one point",
+    ("distort", "xn", "empty"): "no points in, no points out",
+    ("distort", "dist", "drop_column"): "4 coefficients mean k3 = 0 (documented, as in OpenCV)",
+    ("undistort_points", "x", "one_row"): "one point",
+    ("undistort_points", "x", "empty"): "no points in, no points out",
+    ("undistort_points", "dist", "drop_column"): "4 coefficients mean k3 = 0 (documented, as in OpenCV)",
+    ("background_model", "images", "one_row"): "one image is enough to learn the colours at its border",
+    ("silhouette", "image", "one_row"): "an image one pixel high is an image",
+    ("silhouette", "threshold", "zero"): "0 is the strictest threshold: every colour not seen at the border is object",
+    ("vertex_views", "faces", "one_row"): "one triangle is a mesh (the vertices on no face face no camera)",
 }
 NAN_IS_DOCUMENTED = {("camera_center", "R", "nan"), ("camera_center", "t", "nan")}
 
@@ -167,6 +264,10 @@ def _mutations(value):
     return out
 
 
+def _is_rng(v):
+    return isinstance(v, str) and v == "RNG"
+
+
 def _calls():
     for name, (args, kwargs) in VALID.items():
         fn = getattr(lu, name)
@@ -175,7 +276,7 @@ def _calls():
             for kind, bad in _mutations(v):
                 yield name, params[k], kind, (args[:k] + (bad,) + args[k + 1:]), kwargs
         for key, v in kwargs.items():
-            if v == "RNG":
+            if _is_rng(v):
                 for kind, bad in (("none", None), ("int", 42)):
                     yield name, key, kind, args, {**kwargs, key: bad}
             else:
@@ -187,13 +288,22 @@ CALLS = list(_calls())
 
 
 def _run(name, args, kwargs):
-    kwargs = {k: (rng() if v == "RNG" else v) for k, v in kwargs.items()}
+    kwargs = {k: (rng() if _is_rng(v) else v) for k, v in kwargs.items()}
     return getattr(lu, name)(*args, **kwargs)
 
 
 def test_every_public_function_is_swept():
     missing = sorted(set(lu.__all__) - set(VALID) - set(NOT_SWEPT))
     assert not missing, f"public names neither swept nor excused in NOT_SWEPT: {missing}"
+
+
+def test_no_public_name_is_a_module_name():
+    """Importing ``labutils.x`` sets the package's attribute ``x`` to the module, so a public name ``x`` that is also a
+    module's (``ransac``, ``rotation_averaging``, ``global_sfm``, ``carve``) would be the function or the module
+    depending on what was imported first; and ``import labutils.x as m`` would give the function once it is loaded."""
+    modules = {m.name for m in pkgutil.iter_modules(lu.__path__)}
+    both = sorted(set(lu.__all__) & modules)
+    assert not both, f"public names that are also module names: {both}"
 
 
 @pytest.mark.parametrize("name", sorted(VALID))

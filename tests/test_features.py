@@ -83,6 +83,20 @@ def test_build_tracks_bad_input():
     assert ft.build_tracks({}, [3, 4]).shape == (2, 0)
 
 
+def test_images_pairs_and_thresholds_bad_input():
+    """What the API sweep (test_api_sweep) cannot reach: a float image, a view index that is not an integer, and
+    verify_tracks' own threshold."""
+    with pytest.raises(ValueError, match="image must be uint8"):         # cast to uint8, [0, 1] would be black
+        ft.detect_features(np.random.default_rng(0).uniform(size=(32, 32)))
+    f = [ft.Features(np.zeros((0, 2)), np.zeros((0, 8), np.float32))] * 3
+    with pytest.raises(ValueError, match=r"row 1 is \[1.0, 1.5\]"):
+        ft.match_views(f, [[0, 1], [1, 1.5]], rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match=r"row 0 is \[2.0, 2.0\]"):
+        ft.match_views(f, [[2, 2]], rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match="threshold_px must be a positive number"):
+        ft.verify_tracks(np.zeros((2, 1, 2)), {}, 0.0)
+
+
 def test_select_pairs():
     assert len(ft.select_pairs(36)) == 630
     assert len(ft.select_pairs(36, "ring", 2)) == 72 and len(ft.select_pairs(36, "sequence", 2)) == 69

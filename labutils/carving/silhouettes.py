@@ -29,9 +29,9 @@ def _as_number(value, name, *, lo=None, hi=None, integer=False, open_lo=False):
 
 def _as_image(image, name="image"):
     a = np.asarray(image)
-    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
-        raise ValueError(f"{name} must be an RGB image, a (H, W, 3) uint8 array; got shape {a.shape} and dtype "
-                         f"{a.dtype}")
+    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8 or a.size == 0:
+        raise ValueError(f"{name} must be an RGB image, a (H, W, 3) uint8 array with H, W > 0; got shape {a.shape} "
+                         f"and dtype {a.dtype}")
     return a
 
 

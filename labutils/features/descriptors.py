@@ -1,10 +1,12 @@
 """Features and their matches: SIFT, nearest neighbours, the ratio test and the mutual (cross) check."""
+import numbers
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validation import as_array, as_count, as_positive
 from .images import resize_gray, to_original_pixels
 
 # ---------------------------------------------------------------------------------------------
@@ -55,17 +57,22 @@ def detect_features(image: ArrayLike, *, scale: float = 1.0, n_features: int = 0
     image : (H, W) or (H, W, 3) uint8 array_like
         Grey or RGB, already at the working size.
     scale : float
-        Working size / original size, recorded in the result (see :func:`read_gray`).
+        Working size / original size (> 0), recorded in the result (see :func:`read_gray`).
     n_features : int
         Keep at most this many (the strongest); 0 keeps all.
     contrast_threshold : float
-        SIFT's threshold on the contrast of a keypoint (lower: more, weaker keypoints).
+        SIFT's threshold on the contrast of a keypoint, >= 0 (lower: more, weaker keypoints).
     precise_upscale : bool
         Enlarge the image with the pixel centres kept (False: OpenCV's default, a quarter pixel off).
 
     Returns
     -------
     Features
+
+    Raises
+    ------
+    ValueError
+        An image that is not a non-empty ``(H, W)`` or ``(H, W, 3)`` uint8 array, or a bad setting.
 
     Examples
     --------
@@ -74,12 +81,15 @@ def detect_features(image: ArrayLike, *, scale: float = 1.0, n_features: int = 0
     ((0, 2), (0, 128))
     """
     gray, _ = resize_gray(image)
-    sift = cv2.SIFT_create(nfeatures=int(n_features), contrastThreshold=float(contrast_threshold),
+    scale = as_positive(scale, "scale")
+    n_features = as_count(n_features, "n_features", minimum=0)
+    contrast_threshold = as_positive(contrast_threshold, "contrast_threshold", allow_zero=True)
+    sift = cv2.SIFT_create(nfeatures=n_features, contrastThreshold=contrast_threshold,
                            enable_precise_upscale=bool(precise_upscale))
     kps, desc = sift.detectAndCompute(gray, None)
     xy = np.array([k.pt for k in kps], float).reshape(-1, 2)
     desc = np.zeros((0, 128), np.float32) if desc is None else desc.astype(np.float32)
-    return Features(xy=xy, descriptors=desc, scale=float(scale), image_size=(gray.shape[1], gray.shape[0]))
+    return Features(xy=xy, descriptors=desc, scale=scale, image_size=(gray.shape[1], gray.shape[0]))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -87,7 +97,7 @@ def detect_features(image: ArrayLike, *, scale: float = 1.0, n_features: int = 0
 # ---------------------------------------------------------------------------------------------
 
 def _as_descriptors(d, name):
-    d = np.asarray(d)
+    d = as_array(d, name, "(N, D)")
     if d.ndim != 2:
         raise ValueError(f"{name} must have shape (N, D) (one descriptor per row); got shape {d.shape}")
     d = d.astype(np.float32, copy=False)
@@ -179,8 +189,8 @@ def ratio_test(dist: ArrayLike, ratio: float = 0.8) -> np.ndarray:
         raise ValueError(f"dist must have shape (N, 2) (nearest, second nearest); got shape {d.shape}")
     if np.isnan(d).any() or (d < 0).any():
         raise ValueError("dist must hold non-negative distances (inf allowed, no NaN)")
-    if not 0 < ratio <= 1:
-        raise ValueError(f"ratio must be in (0, 1]; got {ratio}")
+    if not (isinstance(ratio, numbers.Real) and not isinstance(ratio, bool) and 0 < ratio <= 1):
+        raise ValueError(f"ratio must be in (0, 1]; got {ratio!r}")
     return d[:, 0] < ratio * d[:, 1]
 
 

@@ -98,12 +98,18 @@ def resize_gray(image: ArrayLike, max_size: int | None = None) -> tuple[np.ndarr
     >>> g.shape, s
     ((200, 300), 0.5)
     """
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 3:
-        img = cv2.cvtColor(np.ascontiguousarray(img, dtype=np.uint8), cv2.COLOR_RGB2GRAY)
-    elif img.ndim != 2:
-        raise ValueError(f"image must have shape (H, W) or (H, W, 3); got {img.shape}")
-    img = np.ascontiguousarray(img, dtype=np.uint8)
+    try:
+        img = np.asarray(image)
+    except ValueError as exc:
+        raise ValueError(f"image must be a (H, W) or (H, W, 3) uint8 array: {exc}") from None
+    if not (img.ndim == 2 or img.ndim == 3 and img.shape[2] == 3) or img.size == 0:
+        raise ValueError(f"image must have shape (H, W) or (H, W, 3) with H, W > 0; got {img.shape}")
+    if img.dtype != np.uint8:        # a float image in [0, 1] cast to uint8 would be black: no keypoints, no error
+        raise ValueError(f"image must be uint8 (0..255); got dtype {img.dtype} (convert it yourself, e.g. "
+                         "np.clip(255 * img, 0, 255).astype(np.uint8) for a float image in [0, 1])")
+    if img.ndim == 3:
+        img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2GRAY)
+    img = np.ascontiguousarray(img)
     if max_size is None or max(img.shape) <= max_size:
         return img, 1.0
     if max_size < 16:

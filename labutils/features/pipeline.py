@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validation import as_array, as_calibration, as_positive
 from .descriptors import Features, match_descriptors
 from .geometric import epipolar_filter
 from .tracks import build_tracks, track_pixels, verify_tracks
@@ -82,15 +83,8 @@ def match_views(features: Sequence[Features], pairs: ArrayLike, *, rng: np.rando
     if not isinstance(rng, np.random.Generator):
         raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
     V = len(features)
-    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    if pairs.size and (pairs.min() < 0 or pairs.max() >= V or np.any(pairs[:, 0] == pairs[:, 1])):
-        raise ValueError(f"pairs must hold two different view indices in 0..{V - 1}")
-    Ks = None
-    if K is not None:
-        Ks = np.asarray(K, float)
-        Ks = np.repeat(Ks[None], V, axis=0) if Ks.shape == (3, 3) else Ks
-        if Ks.shape != (V, 3, 3) or not np.isfinite(Ks).all():
-            raise ValueError(f"K must have shape (3, 3) or ({V}, 3, 3) with finite entries; got {np.shape(K)}")
+    pairs = _as_pairs(pairs, V)
+    Ks = None if K is None else as_calibration(K, "K", n_views=V, like_name="features")
     matches, geometry, table = {}, {}, []
     seconds = {"matching": 0.0, "epipolar": 0.0}
     for n, (i, j) in enumerate(pairs.tolist()):
@@ -125,6 +119,29 @@ def match_views(features: Sequence[Features], pairs: ArrayLike, *, rng: np.rando
         if progress is not None:
             progress(n + 1, len(pairs))
     return MatchResult(matches=matches, geometry=geometry, table=table, seconds=seconds)
+
+
+def _as_pairs(pairs, n_views):
+    """``pairs`` as a ``(P, 2)`` int array of two different views in ``0..n_views - 1`` (P may be 0), or ValueError.
+
+    >>> _as_pairs([[0, 1], [2, 1]], 3).tolist()
+    [[0, 1], [2, 1]]
+    >>> _as_pairs([[0, 1, 2], [1, 2, 0]], 3)
+    Traceback (most recent call last):
+    ...
+    ValueError: pairs must have shape (P, 2) (two view indices per row); got shape (2, 3) — transposed?
+    """
+    p = as_array(pairs, "pairs", "(P, 2)")
+    if p.ndim != 2 or p.shape[1] != 2:
+        hint = " — transposed?" if p.ndim == 2 and p.shape[0] == 2 else ""
+        raise ValueError(f"pairs must have shape (P, 2) (two view indices per row); got shape {p.shape}{hint}")
+    with np.errstate(invalid="ignore"):
+        ok = (p == np.round(p)) & (p >= 0) & (p < n_views)
+    bad = np.flatnonzero(~ok.all(axis=1) | (p[:, 0] == p[:, 1]))
+    if bad.size:
+        raise ValueError(f"pairs must hold two different integer view indices in 0..{n_views - 1}; "
+                         f"row {bad[0]} is {p[bad[0]].tolist()}")
+    return p.astype(np.int64)
 
 
 @dataclass
@@ -162,12 +179,14 @@ def tracks_from_matches(features: Sequence[Features], result: MatchResult, *,
     features : sequence of V :class:`Features`
     result : MatchResult
     verify_px : float, optional
-        Threshold of :func:`verify_tracks` (None: no check).
+        Threshold of :func:`verify_tracks`, > 0 (None: no check).
 
     Returns
     -------
     TrackResult
     """
+    if verify_px is not None:
+        verify_px = as_positive(verify_px, "verify_px")
     ids, n_conf = build_tracks(result.matches, [len(f) for f in features], return_conflicts=True)
     x = track_pixels(ids, [f.xy for f in features])
     n_cand = ids.shape[1] + n_conf

@@ -4,6 +4,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validation import as_positive
 from ..epipolar import sampson_distance
 
 # ---------------------------------------------------------------------------------------------
@@ -191,6 +192,7 @@ def verify_tracks(x: ArrayLike, geometry: dict, threshold_px: float) -> np.ndarr
     x = np.asarray(x, float)
     if x.ndim != 3 or x.shape[2] != 2:
         raise ValueError(f"x must have shape (V, T, 2); got {x.shape}")
+    threshold_px = as_positive(threshold_px, "threshold_px")
     seen = np.isfinite(x[..., 0])
     keep = np.ones(x.shape[1], bool)
     for (i, j), F in geometry.items():
