@@ -3,6 +3,8 @@
 Conventions (see the package docstring): ``x_cam = R @ X + t``, ``C = -R.T @ t``,
 ``P = K @ [R | t]``; points are rows; a homogeneous copy has the suffix ``_h``.
 """
+import math
+
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike
@@ -108,10 +110,15 @@ def rotation_from_angle_axis(w: ArrayLike) -> np.ndarray:
     (4, 3, 3)
     """
     w, single = _angle_axis_stack(w, "w")
+    if single:                      # one rotation: the same formula without the stacking (called in inner loops)
+        x, y, z = w[0]
+        theta = math.sqrt(x * x + y * y + z * z)
+        a, b, _ = (float(c) for c in _aa_coefficients(theta))
+        W = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        return np.eye(3) + a * W + b * (W @ W)
     a, b, _ = _aa_coefficients(np.linalg.norm(w, axis=1))
     W = _skew_stack(w)
-    R = np.eye(3) + a[:, None, None] * W + b[:, None, None] * (W @ W)
-    return R[0] if single else R
+    return np.eye(3) + a[:, None, None] * W + b[:, None, None] * (W @ W)
 
 
 def angle_axis_from_rotation(R: ArrayLike) -> np.ndarray:
