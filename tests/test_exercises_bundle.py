@@ -1,6 +1,7 @@
 """Notebook 04's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex04_bundle import check_projection_jacobian, check_schur_step, check_sparsity_mask
 from labutils.geometry import left_jacobian_so3, rotation_from_angle_axis
@@ -52,21 +53,11 @@ def schur_step_reference(J, r, n_cam_cols, mu):
                                              (check_sparsity_mask, jacobian_sparsity),
                                              (check_schur_step, schur_step_reference)])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    for check in (check_projection_jacobian, check_sparsity_mask, check_schur_step):
-        report = check(stub)
-        assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_projection_jacobian, check_sparsity_mask, check_schur_step)
 
 
 # --- exercise 1: typical mistakes ---------------------------------------------------------------------------------
@@ -74,7 +65,7 @@ def test_stub_is_reported_as_not_written(capsys):
 def test_jacobian_without_left_jacobian_fails_only_away_from_zero():
     report = check_projection_jacobian(lambda *a: projection_jacobian_reference(*a, left=False), verbose=False)
     assert [c.passed for c in report.cases] == [False, True, False]
-    assert "missing J_l(ω)" in _hints(report)
+    assert "missing J_l(ω)" in hints(report)
 
 
 def test_jacobian_right_instead_of_left():
@@ -82,7 +73,7 @@ def test_jacobian_right_instead_of_left():
         Jc, Jp = projection_jacobian_reference(cp, X, ci, pi, K, left=False)
         Jc[:, :, :3] = Jc[:, :, :3] @ np.swapaxes(left_jacobian_so3(cp[ci, :3]), 1, 2)
         return Jc, Jp
-    assert "right Jacobian" in _hints(check_projection_jacobian(wrong, verbose=False))
+    assert "right Jacobian" in hints(check_projection_jacobian(wrong, verbose=False))
 
 
 def test_jacobian_rotation_sign():
@@ -90,21 +81,21 @@ def test_jacobian_rotation_sign():
         Jc, Jp = projection_jacobian_reference(*a)
         Jc[:, :, :3] *= -1
         return Jc, Jp
-    assert "wrong sign" in _hints(check_projection_jacobian(wrong, verbose=False))
+    assert "wrong sign" in hints(check_projection_jacobian(wrong, verbose=False))
 
 
 def test_jacobian_point_block_without_R():
     def wrong(cp, X, ci, pi, K):
         Jc, _ = projection_jacobian_reference(cp, X, ci, pi, K)
         return Jc, Jc[:, :, 3:].copy()
-    assert "∂P/∂X = R" in _hints(check_projection_jacobian(wrong, verbose=False))
+    assert "∂P/∂X = R" in hints(check_projection_jacobian(wrong, verbose=False))
 
 
 def test_jacobian_skew_dropped():
     def wrong(cp, X, ci, pi, K):
         return projection_jacobian_reference(cp, X, ci, pi, np.diag(np.diag(K)))
     report = check_projection_jacobian(wrong, verbose=False)
-    assert [c.passed for c in report.cases] == [True, True, False] and "skew" in _hints(report)
+    assert [c.passed for c in report.cases] == [True, True, False] and "skew" in hints(report)
 
 
 def test_jacobian_unrotated_point():
@@ -113,7 +104,7 @@ def test_jacobian_unrotated_point():
         du = Jc[:, :, 3:]
         Jc[:, :, :3] = -du @ np.cross(np.eye(3), X[pi][:, None, :]) @ left_jacobian_so3(cp[ci, :3])
         return Jc, Jp
-    assert "[X]×" in _hints(check_projection_jacobian(wrong, verbose=False))
+    assert "[X]×" in hints(check_projection_jacobian(wrong, verbose=False))
 
 
 # --- exercise 2: typical mistakes ---------------------------------------------------------------------------------
@@ -128,40 +119,40 @@ def test_mask_without_point_block():
     def change(A, V, M):
         A[:, 6 * V:] = False
         return A
-    assert "point columns are empty" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+    assert "point columns are empty" in hints(check_sparsity_mask(_mask_variant(change), verbose=False))
 
 
 def test_mask_points_first():
     def change(A, V, M):
         return np.hstack([A[:, 6 * V:], A[:, :6 * V]])
-    assert "cameras come first" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+    assert "cameras come first" in hints(check_sparsity_mask(_mask_variant(change), verbose=False))
 
 
 def test_mask_one_row_per_observation():
     def change(A, V, M):
         return A[0::2]
-    assert "two residuals" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+    assert "two residuals" in hints(check_sparsity_mask(_mask_variant(change), verbose=False))
 
 
 def test_mask_only_x_rows():
     def change(A, V, M):
         A[1::2] = False
         return A
-    assert "both rows" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+    assert "both rows" in hints(check_sparsity_mask(_mask_variant(change), verbose=False))
 
 
 def test_mask_shape_from_the_indices():
     def wrong(V, M, ci, pi):
         return sparsity_mask_reference(int(ci.max()) + 1, int(pi.max()) + 1, ci, pi)
     report = check_sparsity_mask(wrong, verbose=False)
-    assert [c.passed for c in report.cases] == [True, True, False] and "n_cameras and n_points" in _hints(report)
+    assert [c.passed for c in report.cases] == [True, True, False] and "n_cameras and n_points" in hints(report)
 
 
 def test_mask_too_full():
     def change(A, V, M):
         A[:, :6 * V] = True                                          # every camera for every row
         return A
-    assert "too many" in _hints(check_sparsity_mask(_mask_variant(change), verbose=False))
+    assert "too many" in hints(check_sparsity_mask(_mask_variant(change), verbose=False))
 
 
 # --- exercise 3: typical mistakes ---------------------------------------------------------------------------------
@@ -192,4 +183,4 @@ def _schur_variant(damping="marquardt", rhs_sign=-1, S_sign=-1, back_sign=1, dia
     (dict(diagonal_V=True), "3×3 blocks"),
 ])
 def test_schur_mistakes(kwargs, words):
-    assert words in _hints(check_schur_step(_schur_variant(**kwargs), verbose=False))
+    assert words in hints(check_schur_step(_schur_variant(**kwargs), verbose=False))

@@ -1,6 +1,7 @@
 """Notebook 13's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex13_calibration import check_distort_points, check_rectifying_rotation, check_zhang_intrinsics
 from labutils.lens import distort
@@ -46,26 +47,17 @@ def rectifying_reference(R, t):
                                              (check_distort_points, distort),
                                              (check_rectifying_rotation, rectifying_reference)])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    report = check_zhang_intrinsics(stub)
-    assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_zhang_intrinsics)
 
 
 # --- exercise 1: typical mistakes ---------------------------------------------------------------------------------
 
 def test_zhang_rows_instead_of_columns():
-    assert "column" in _hints(check_zhang_intrinsics(lambda Hs: zhang_reference(np.swapaxes(Hs, 1, 2)), verbose=False))
+    assert "column" in hints(check_zhang_intrinsics(lambda Hs: zhang_reference(np.swapaxes(Hs, 1, 2)), verbose=False))
 
 
 def test_zhang_returns_inverse():
@@ -73,12 +65,12 @@ def test_zhang_returns_inverse():
         K = zhang_reference(Hs)
         Ki = np.linalg.inv(K)
         return Ki / Ki[2, 2]
-    assert "K⁻¹" in _hints(check_zhang_intrinsics(wrong, verbose=False))
+    assert "K⁻¹" in hints(check_zhang_intrinsics(wrong, verbose=False))
 
 
 def test_zhang_returns_cholesky_factor():
-    assert "Cholesky factor L" in _hints(check_zhang_intrinsics(lambda Hs: np.linalg.inv(zhang_reference(Hs)).T,
-                                                                verbose=False))
+    assert "Cholesky factor L" in hints(check_zhang_intrinsics(lambda Hs: np.linalg.inv(zhang_reference(Hs)).T,
+                                                               verbose=False))
 
 
 def test_zhang_forgets_sign():
@@ -93,7 +85,7 @@ def test_zhang_forgets_sign():
         B = np.array([[b[0], b[1], b[3]], [b[1], b[2], b[4]], [b[3], b[4], b[5]]])
         K = np.linalg.inv(np.linalg.cholesky(B).T)
         return K / K[2, 2]
-    assert "up to sign" in _hints(check_zhang_intrinsics(wrong, verbose=False))
+    assert "up to sign" in hints(check_zhang_intrinsics(wrong, verbose=False))
 
 
 def test_zhang_one_equation_per_view():
@@ -108,11 +100,11 @@ def test_zhang_one_equation_per_view():
         B = -B if B[0, 0] < 0 else B
         K = np.linalg.inv(np.linalg.cholesky(B).T)
         return K / K[2, 2]
-    assert "two* equations" in _hints(check_zhang_intrinsics(wrong, verbose=False))
+    assert "two* equations" in hints(check_zhang_intrinsics(wrong, verbose=False))
 
 
 def test_zhang_not_normalised():
-    assert "K[2, 2]" in _hints(check_zhang_intrinsics(lambda Hs: 3.0 * zhang_reference(Hs), verbose=False))
+    assert "K[2, 2]" in hints(check_zhang_intrinsics(lambda Hs: 3.0 * zhang_reference(Hs), verbose=False))
 
 
 # --- exercise 2 ------------------------------------------------------------------------------------------------
@@ -120,7 +112,7 @@ def test_zhang_not_normalised():
 def test_distort_swapped_tangential():
     def wrong(xn, d):
         return distort_reference(xn, [d[0], d[1], d[3], d[2], d[4]])
-    assert "swapped" in _hints(check_distort_points(wrong, verbose=False))
+    assert "swapped" in hints(check_distort_points(wrong, verbose=False))
 
 
 def test_distort_r_instead_of_r2():
@@ -129,16 +121,16 @@ def test_distort_r_instead_of_r2():
         r = np.linalg.norm(xn, axis=1)
         out = distort_reference(xn, [0, 0, p1, p2, 0])
         return out + xn * (k1 * r + k2 * r ** 2 + k3 * r ** 3)[:, None]
-    assert "uses r instead of r²" in _hints(check_distort_points(wrong, verbose=False))
+    assert "uses r instead of r²" in hints(check_distort_points(wrong, verbose=False))
 
 
 def test_distort_without_k3():
-    assert "k3 is missing" in _hints(check_distort_points(lambda xn, d: distort_reference(xn, [*d[:4], 0.0]),
-                                                          verbose=False))
+    assert "k3 is missing" in hints(check_distort_points(lambda xn, d: distort_reference(xn, [*d[:4], 0.0]),
+                                                         verbose=False))
 
 
 def test_distort_without_tangential():
-    assert "tangential terms (p1, p2) are missing" in _hints(
+    assert "tangential terms (p1, p2) are missing" in hints(
         check_distort_points(lambda xn, d: distort_reference(xn, [d[0], d[1], 0, 0, d[4]]), verbose=False))
 
 
@@ -148,7 +140,7 @@ def test_rectifying_baseline_reversed():
     def wrong(R, t):
         Rr = rectifying_reference(R, t)
         return np.stack([-Rr[0], -Rr[1], Rr[2]])
-    assert "from camera 2 to camera 1" in _hints(check_rectifying_rotation(wrong, verbose=False))
+    assert "from camera 2 to camera 1" in hints(check_rectifying_rotation(wrong, verbose=False))
 
 
 def test_rectifying_uses_t_as_baseline():
@@ -157,18 +149,18 @@ def test_rectifying_uses_t_as_baseline():
         y = np.cross([0.0, 0.0, 1.0], x)
         y /= np.linalg.norm(y)
         return np.stack([x, y, np.cross(x, y)])
-    assert "C2 = -Rᵀt" in _hints(check_rectifying_rotation(wrong, verbose=False))
+    assert "C2 = -Rᵀt" in hints(check_rectifying_rotation(wrong, verbose=False))
 
 
 def test_rectifying_columns_instead_of_rows():
-    assert "rows" in _hints(check_rectifying_rotation(lambda R, t: rectifying_reference(R, t).T, verbose=False))
+    assert "rows" in hints(check_rectifying_rotation(lambda R, t: rectifying_reference(R, t).T, verbose=False))
 
 
 def test_rectifying_y_up():
     def wrong(R, t):
         Rr = rectifying_reference(R, t)
         return np.stack([Rr[0], -Rr[1], -Rr[2]])
-    assert "y points up" in _hints(check_rectifying_rotation(wrong, verbose=False))
+    assert "y points up" in hints(check_rectifying_rotation(wrong, verbose=False))
 
 
 def test_rectifying_library_matches_reference():

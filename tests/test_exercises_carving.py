@@ -1,6 +1,7 @@
 """Notebook 11's self-checks: the reference solutions pass, and typical wrong answers get the matching hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written
 
 from labutils.carving import inside_silhouette, mask_iou
 from labutils.exercises.ex11_carving import check_carve_step, check_mask_iou, check_silhouette_from_colour
@@ -13,16 +14,11 @@ def reference_silhouette(image, background, threshold):
 @pytest.mark.parametrize("check, func", [(check_silhouette_from_colour, reference_silhouette),
                                          (check_carve_step, inside_silhouette), (check_mask_iou, mask_iou)])
 def test_reference_passes(check, func):
-    report = check(func, verbose=False)
-    assert report.passed and report.written and len(report.cases) >= 3
+    assert_passes(check, func, min_cases=3)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-
-    report = check_mask_iou(stub)
-    assert not report.written and not report.passed and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_mask_iou)
 
 
 @pytest.mark.parametrize("wrong, words", [

@@ -1,6 +1,7 @@
 """Notebook 02's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.essential import decompose_essential
 from labutils.exercises.ex02_essential import check_choose_pose, check_four_poses, check_triangulate_linear
@@ -59,21 +60,11 @@ def triangulate_linear_reference(P1, P2, x1, x2, unit_rows=False, dehom=True, ve
     (check_triangulate_linear, triangulate),
 ])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    for check in (check_four_poses, check_choose_pose, check_triangulate_linear):
-        report = check(stub)
-        assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_four_poses, check_choose_pose, check_triangulate_linear)
 
 
 # --- exercise 1: the four poses -----------------------------------------------------------------------------------
@@ -84,7 +75,7 @@ def test_stub_is_reported_as_not_written(capsys):
     (dict(t_from="V"), "left* null vector"),
 ])
 def test_four_poses_mistakes(kwargs, words):
-    assert words in _hints(check_four_poses(lambda E: four_poses_reference(E, **kwargs), verbose=False))
+    assert words in hints(check_four_poses(lambda E: four_poses_reference(E, **kwargs), verbose=False))
 
 
 def test_four_poses_with_singular_values_in_r():
@@ -93,51 +84,51 @@ def test_four_poses_with_singular_values_in_r():
         U, Vt = U * np.sign(np.linalg.det(U)), Vt * np.sign(np.linalg.det(Vt))
         R = U @ np.diag(s) @ W @ Vt
         return [(R, U[:, 2]), (R, -U[:, 2]), (U @ W.T @ Vt, U[:, 2]), (U @ W.T @ Vt, -U[:, 2])]
-    assert "not a rotation" in _hints(check_four_poses(wrong, verbose=False))
+    assert "not a rotation" in hints(check_four_poses(wrong, verbose=False))
 
 
 def test_four_poses_one_rotation_twice():
     def wrong(E):
         poses = four_poses_reference(E)
         return [poses[0], poses[1], poses[0], poses[1]]
-    assert "same rotation twice" in _hints(check_four_poses(wrong, verbose=False))
+    assert "same rotation twice" in hints(check_four_poses(wrong, verbose=False))
 
 
 def test_four_poses_t_not_unit():
     def wrong(E):
         return [(R, 2 * t) for R, t in four_poses_reference(E)]
-    assert "unit vector" in _hints(check_four_poses(wrong, verbose=False))
+    assert "unit vector" in hints(check_four_poses(wrong, verbose=False))
 
 
 def test_four_poses_t_as_column():
-    assert "U[:, 2]" in _hints(check_four_poses(lambda E: [(R, t[:, None]) for R, t in four_poses_reference(E)],
-                                                verbose=False))
+    assert "U[:, 2]" in hints(check_four_poses(lambda E: [(R, t[:, None]) for R, t in four_poses_reference(E)],
+                                               verbose=False))
 
 
 # --- exercise 2: the cheirality choice ---------------------------------------------------------------------------
 
 def test_choose_pose_camera_1_only():
-    hints = _hints(check_choose_pose(lambda *a: choose_pose_reference(*a, camera2=False), verbose=False))
-    assert "in front of camera 2 too" in hints and "camera 1 alone" in hints
+    found = hints(check_choose_pose(lambda *a: choose_pose_reference(*a, camera2=False), verbose=False))
+    assert "in front of camera 2 too" in found and "camera 1 alone" in found
 
 
 def test_choose_pose_without_t():
-    hints = _hints(check_choose_pose(lambda *a: choose_pose_reference(*a, use_t=False), verbose=False))
-    assert "you left out t" in hints and "with t" in hints
+    found = hints(check_choose_pose(lambda *a: choose_pose_reference(*a, use_t=False), verbose=False))
+    assert "you left out t" in found and "with t" in found
 
 
 def test_choose_pose_every_point_in_front():
-    assert "the most points in front" in _hints(check_choose_pose(lambda *a: choose_pose_reference(*a, all_points=True),
-                                                       verbose=False))
+    assert "the most points in front" in hints(check_choose_pose(lambda *a: choose_pose_reference(*a, all_points=True),
+                                                      verbose=False))
 
 
 def test_choose_pose_first_candidate():
-    assert "choose the one with the most" in _hints(check_choose_pose(lambda poses, y1, y2: poses[0], verbose=False))
+    assert "choose the one with the most" in hints(check_choose_pose(lambda poses, y1, y2: poses[0], verbose=False))
 
 
 def test_choose_pose_new_pose():
-    assert "unchanged" in _hints(check_choose_pose(lambda poses, y1, y2: (poses[0][0], 2 * poses[0][1]),
-                                                   verbose=False))
+    assert "unchanged" in hints(check_choose_pose(lambda poses, y1, y2: (poses[0][0], 2 * poses[0][1]),
+                                                  verbose=False))
 
 
 # --- exercise 3: linear triangulation ----------------------------------------------------------------------------
@@ -148,16 +139,16 @@ def test_choose_pose_new_pose():
     (dict(rows="swapped"), "x goes with the first row"),
 ])
 def test_triangulate_mistakes(kwargs, words):
-    assert words in _hints(check_triangulate_linear(lambda *a: triangulate_linear_reference(*a, **kwargs),
-                                                    verbose=False))
+    assert words in hints(check_triangulate_linear(lambda *a: triangulate_linear_reference(*a, **kwargs),
+                                                   verbose=False))
 
 
 def test_triangulate_camera_1_twice():
-    assert "camera 1's P for both" in _hints(check_triangulate_linear(
+    assert "camera 1's P for both" in hints(check_triangulate_linear(
         lambda P1, P2, x1, x2: triangulate_linear_reference(P1, P1, x1, x2), verbose=False))
 
 
 def test_triangulate_not_dehomogenised():
     def wrong(P1, P2, x1, x2):
         return triangulate_linear_reference(P1, P2, x1, x2, dehom=False)[:, :3]
-    assert "4th coordinate" in _hints(check_triangulate_linear(wrong, verbose=False))
+    assert "4th coordinate" in hints(check_triangulate_linear(wrong, verbose=False))

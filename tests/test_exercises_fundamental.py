@@ -1,6 +1,7 @@
 """Notebook 01's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.epipolar import fundamental_8point, hartley_normalisation, sampson_distance
 from labutils.exercises.ex01_fundamental import check_eight_point, check_normalisation_matrix, check_sampson
@@ -50,26 +51,16 @@ def sampson_reference(F, x1, x2):
     (check_sampson, sampson_distance),
 ])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    for check in (check_normalisation_matrix, check_eight_point, check_sampson):
-        report = check(stub)
-        assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_normalisation_matrix, check_eight_point, check_sampson)
 
 
 def test_a_student_error_is_a_hint_not_an_exception():
     report = check_sampson(lambda F, x1, x2: 1 / 0, verbose=False)
-    assert "ZeroDivisionError" in _hints(report)
+    assert "ZeroDivisionError" in hints(report)
 
 
 # --- exercise 1: the normalisation --------------------------------------------------------------------------------
@@ -94,7 +85,7 @@ def _normalisation(scale_to=2 ** 0.5, centre=True, scale_translation=True, sprea
     (lambda x: normalisation_reference(x)[:2], "(3, 3)"),
 ])
 def test_normalisation_mistakes(wrong, words):
-    assert words in _hints(check_normalisation_matrix(wrong, verbose=False))
+    assert words in hints(check_normalisation_matrix(wrong, verbose=False))
 
 
 def test_normalisation_from_the_pixel_origin():
@@ -102,7 +93,7 @@ def test_normalisation_from_the_pixel_origin():
         c = x.mean(0)
         s = np.sqrt(2) / np.linalg.norm(x, axis=1).mean()
         return np.array([[s, 0, -s * c[0]], [0, s, -s * c[1]], [0, 0, 1]])
-    assert "from the centroid" in _hints(check_normalisation_matrix(wrong, verbose=False))
+    assert "from the centroid" in hints(check_normalisation_matrix(wrong, verbose=False))
 
 
 def test_normalisation_per_axis():
@@ -110,7 +101,7 @@ def test_normalisation_per_axis():
         c = x.mean(0)
         sx, sy = np.sqrt(2) / np.abs(x - c).mean(0)
         return np.array([[sx, 0, -sx * c[0]], [0, sy, -sy * c[1]], [0, 0, 1]])
-    assert "one scale s for both axes" in _hints(check_normalisation_matrix(wrong, verbose=False))
+    assert "one scale s for both axes" in hints(check_normalisation_matrix(wrong, verbose=False))
 
 
 # --- exercise 2: the 8-point --------------------------------------------------------------------------------------
@@ -121,7 +112,7 @@ def test_eight_point_without_rank_2():
         y1, y2 = _h(x1) @ T1.T, _h(x2) @ T2.T
         A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
         return T2.T @ np.linalg.svd(A)[2][-1].reshape(3, 3) @ T1
-    assert "rank 3" in _hints(check_eight_point(wrong, verbose=False))
+    assert "rank 3" in hints(check_eight_point(wrong, verbose=False))
 
 
 @pytest.mark.parametrize("kwargs, words", [
@@ -133,18 +124,18 @@ def test_eight_point_without_rank_2():
     (dict(normalise=lambda x: np.eye(3)), "skipped the normalisation"),
 ])
 def test_eight_point_mistakes(kwargs, words):
-    assert words in _hints(check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, **kwargs), verbose=False))
+    assert words in hints(check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, **kwargs), verbose=False))
 
 
 def test_eight_point_transposed():
-    assert "transposed" in _hints(check_eight_point(lambda x1, x2: eight_point_reference(x1, x2).T, verbose=False))
+    assert "transposed" in hints(check_eight_point(lambda x1, x2: eight_point_reference(x1, x2).T, verbose=False))
 
 
 def test_eight_point_with_a_wrong_normalisation_is_caught():
     """A student's own normalisation to mean distance 1 gives a (slightly) different F with noise."""
     report = check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, normalise=_normalisation(scale_to=1.0)),
                                verbose=False)
-    assert "another normalisation" in _hints(report) and "mean distance 1" in _hints(report)
+    assert "another normalisation" in hints(report) and "mean distance 1" in hints(report)
 
 
 # --- exercise 3: the Sampson distance -----------------------------------------------------------------------------
@@ -163,34 +154,34 @@ def _parts(F, x1, x2):
     (lambda F, x1, x2: sampson_reference(F, x1, x2)[:, None], "shape"),
 ])
 def test_sampson_mistakes(wrong, words):
-    assert words in _hints(check_sampson(wrong, verbose=False))
+    assert words in hints(check_sampson(wrong, verbose=False))
 
 
 def test_sampson_signed():
     def wrong(F, x1, x2):
         alg, Fx1, Ftx2 = _parts(F, x1, x2)
         return alg / np.sqrt((Fx1[:, :2] ** 2).sum(1) + (Ftx2[:, :2] ** 2).sum(1))
-    assert "absolute value" in _hints(check_sampson(wrong, verbose=False))
+    assert "absolute value" in hints(check_sampson(wrong, verbose=False))
 
 
 def test_sampson_third_component():
     def wrong(F, x1, x2):
         alg, Fx1, Ftx2 = _parts(F, x1, x2)
         return np.abs(alg) / np.sqrt((Fx1 ** 2).sum(1) + (Ftx2 ** 2).sum(1))
-    assert "third component" in _hints(check_sampson(wrong, verbose=False))
+    assert "third component" in hints(check_sampson(wrong, verbose=False))
 
 
 def test_sampson_symmetric_epipolar_distance():
     def wrong(F, x1, x2):
         alg, Fx1, Ftx2 = _parts(F, x1, x2)
         return np.sqrt((alg / np.hypot(*Fx1[:, :2].T)) ** 2 + (alg / np.hypot(*Ftx2[:, :2].T)) ** 2)
-    assert "symmetric epipolar distance" in _hints(check_sampson(wrong, verbose=False))
+    assert "symmetric epipolar distance" in hints(check_sampson(wrong, verbose=False))
 
 
 def test_eight_point_hint_names_the_wrong_normalisation():
     report = check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, normalise=_normalisation(centre=False)),
                                verbose=False)
-    assert "another normalisation" in _hints(report) and "centroid" in _hints(report)
+    assert "another normalisation" in hints(report) and "centroid" in hints(report)
 
 
 def test_eight_point_reduced_svd():
@@ -200,4 +191,4 @@ def test_eight_point_reduced_svd():
         A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
         U, s, Vt = np.linalg.svd(np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 3))
         return T2.T @ U @ np.diag([s[0], s[1], 0.0]) @ Vt @ T1
-    assert "full_matrices=True" in _hints(check_eight_point(wrong, verbose=False))
+    assert "full_matrices=True" in hints(check_eight_point(wrong, verbose=False))

@@ -1,6 +1,7 @@
 """Notebook 09's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, hints
 
 from labutils.exercises.ex09_global import check_centres_from_directions, check_chordal_rotations
 from labutils.global_translations import centres_from_directions
@@ -61,13 +62,7 @@ def centres_reference(pairs, directions, n_views, *, lift=True, sign=True, check
     (check_centres_from_directions, centres_from_directions),
 ])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 @pytest.mark.parametrize("kwargs, words", [
@@ -77,15 +72,15 @@ def _hints(report):
     (dict(project=False), "not orthonormal"),
 ])
 def test_chordal_mistakes(kwargs, words):
-    assert words in _hints(check_chordal_rotations(lambda p, R, w, n: chordal_reference(p, R, w, n, **kwargs),
-                                                   verbose=False))
+    assert words in hints(check_chordal_rotations(lambda p, R, w, n: chordal_reference(p, R, w, n, **kwargs),
+                                                  verbose=False))
 
 
 def test_chordal_reflection_left_in():
     def wrong(p, R, w, n):
         Rs = chordal_reference(p, R, w, n, fix_reflection=False)
         return Rs * np.array([1.0, 1.0, -1.0])            # as if the eigenvectors had come out mirrored
-    assert "det -1" in _hints(check_chordal_rotations(wrong, verbose=False))
+    assert "det -1" in hints(check_chordal_rotations(wrong, verbose=False))
 
 
 @pytest.mark.parametrize("kwargs, words", [
@@ -99,4 +94,4 @@ def test_centres_mistakes(kwargs, words):
     if words is None:            # without the sign rule the eigenvector's sign is arbitrary: mirrored in some case
         report = check_centres_from_directions(lambda p, d, n: -centres_reference(p, d, n), verbose=False)
         words = "mirrored"
-    assert words in _hints(report)
+    assert words in hints(report)

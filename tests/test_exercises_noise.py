@@ -1,6 +1,7 @@
 """Notebook 06's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex06_noise import (
     _camera,
@@ -32,8 +33,7 @@ def nees_solution(errors, cov):
                                              (check_nees, nees_reference),
                                              (check_nees, nees)])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
+    assert_passes(check, solution)
 
 
 def test_library_covariance_is_the_reference():
@@ -48,16 +48,8 @@ def test_correlated_case_has_the_chi2_mean():
     assert abs(nees_reference(e, cov).mean() - 6) < 3 * np.sqrt(12 / 2000)
 
 
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
-
-
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    report = check_nees(stub)
-    assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_nees)
 
 
 # --- exercise 1: typical mistakes ---------------------------------------------------------------------------------
@@ -78,7 +70,7 @@ def _crb(cov_of, rot_of=lambda cov: np.degrees(np.sqrt(np.trace(cov[:3, :3])))):
     (_crb(lambda J, s: s ** 2 * np.linalg.pinv(J @ J.T)), "not J Jᵀ"),
 ])
 def test_cramer_rao_covariance_mistakes(wrong, words):
-    assert words in _hints(check_cramer_rao_pose(wrong, verbose=False))
+    assert words in hints(check_cramer_rao_pose(wrong, verbose=False))
 
 
 def _ref_cov(J, s):
@@ -93,7 +85,7 @@ def _ref_cov(J, s):
     (lambda c: np.degrees(np.sqrt(np.trace(c[:3, :3]) / 3)), "per axis"),
 ])
 def test_cramer_rao_rotation_mistakes(rot_of, words):
-    assert words in _hints(check_cramer_rao_pose(_crb(_ref_cov, rot_of), verbose=False))
+    assert words in hints(check_cramer_rao_pose(_crb(_ref_cov, rot_of), verbose=False))
 
 
 # --- exercise 2: typical mistakes ---------------------------------------------------------------------------------
@@ -106,4 +98,4 @@ def test_cramer_rao_rotation_mistakes(rot_of, words):
     (lambda e, c: np.sum(e ** 2, axis=1), "|e|²"),
 ])
 def test_nees_mistakes(wrong, words):
-    assert words in _hints(check_nees(wrong, verbose=False))
+    assert words in hints(check_nees(wrong, verbose=False))

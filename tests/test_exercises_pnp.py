@@ -1,6 +1,7 @@
 """Notebook 03's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex03_pnp import check_adaptive_ransac, check_pose_from_depths
 from labutils.ransac import ransac
@@ -34,21 +35,11 @@ def adaptive_ransac_reference(n_data, sample_size, fit, errors, threshold, *, rn
                                              (check_adaptive_ransac, adaptive_ransac_reference),
                                              (check_adaptive_ransac, ransac)])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args, **kwargs):
-        raise NotImplementedError
-    for check in (check_pose_from_depths, check_adaptive_ransac):
-        report = check(stub)
-        assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_pose_from_depths, check_adaptive_ransac)
 
 
 # --- exercise 1: typical mistakes ---------------------------------------------------------------------------------
@@ -68,7 +59,7 @@ def _with(R_of=lambda R: R, t_of=None):
     (lambda X, y, lam: pose_from_depths_reference(X, y, np.ones(3)), "scaled by their depths"),
 ])
 def test_pose_from_depths_mistakes(wrong, words):
-    assert words in _hints(check_pose_from_depths(wrong, verbose=False))
+    assert words in hints(check_pose_from_depths(wrong, verbose=False))
 
 
 def test_pose_from_depths_without_cross_products():
@@ -77,7 +68,7 @@ def test_pose_from_depths_without_cross_products():
         Vm = np.column_stack([lam[0] * y[0] - lam[1] * y[1], lam[0] * y[0] - lam[2] * y[2]])
         R = Vm @ np.linalg.pinv(D)
         return R, lam[0] * y[0] - R @ X[0]
-    assert "cross products" in _hints(check_pose_from_depths(wrong, verbose=False))
+    assert "cross products" in hints(check_pose_from_depths(wrong, verbose=False))
 
 
 def test_pose_from_depths_reflection():
@@ -86,7 +77,7 @@ def test_pose_from_depths_reflection():
         v1, v2 = lam[0] * y[0] - lam[1] * y[1], lam[0] * y[0] - lam[2] * y[2]
         R = np.column_stack([v1, v2, np.cross(v2, v1)]) @ np.linalg.inv(np.column_stack([d1, d2, np.cross(d1, d2)]))
         return R, lam[0] * y[0] - R @ X[0]
-    assert "reflection" in _hints(check_pose_from_depths(wrong, verbose=False))
+    assert "reflection" in hints(check_pose_from_depths(wrong, verbose=False))
 
 
 def test_pose_from_depths_edges_in_the_wrong_order():
@@ -95,7 +86,7 @@ def test_pose_from_depths_edges_in_the_wrong_order():
         v1, v2 = lam[1] * y[1] - lam[0] * y[0], lam[2] * y[2] - lam[0] * y[0]
         R = np.column_stack([v1, v2, np.cross(v1, v2)]) @ np.linalg.inv(np.column_stack([d1, d2, np.cross(d1, d2)]))
         return R, lam[0] * y[0] - R @ X[0]
-    assert "half turn" in _hints(check_pose_from_depths(wrong, verbose=False))
+    assert "half turn" in hints(check_pose_from_depths(wrong, verbose=False))
 
 
 # --- exercise 2: typical mistakes ---------------------------------------------------------------------------------
@@ -119,21 +110,21 @@ def _ransac_variant(adaptive=True, power=True, all_candidates=True, use_rng=True
 
 
 def test_ransac_not_adaptive():
-    assert "not adaptive" in _hints(check_adaptive_ransac(_ransac_variant(adaptive=False), verbose=False))
+    assert "not adaptive" in hints(check_adaptive_ransac(_ransac_variant(adaptive=False), verbose=False))
 
 
 def test_ransac_w_instead_of_w_to_the_s():
-    assert "not w" in _hints(check_adaptive_ransac(_ransac_variant(power=False), verbose=False))
+    assert "not w" in hints(check_adaptive_ransac(_ransac_variant(power=False), verbose=False))
 
 
 def test_ransac_first_candidate_only():
-    assert "only the first candidate" in _hints(check_adaptive_ransac(_ransac_variant(all_candidates=False),
-                                                                      verbose=False))
+    assert "only the first candidate" in hints(check_adaptive_ransac(_ransac_variant(all_candidates=False),
+                                                                     verbose=False))
 
 
 def test_ransac_global_random_state():
-    assert "rng argument was never used" in _hints(check_adaptive_ransac(_ransac_variant(use_rng=False),
-                                                                         verbose=False))
+    assert "rng argument was never used" in hints(check_adaptive_ransac(_ransac_variant(use_rng=False),
+                                                                        verbose=False))
 
 
 def test_ransac_indexing_an_empty_candidate_list():
@@ -147,7 +138,7 @@ def test_ransac_indexing_an_empty_candidate_list():
                 best, best_inliers = model, inliers
                 n_needed = int(np.ceil(np.log(1 - confidence) / np.log(1 - inliers.mean() ** sample_size)))
         return best, best_inliers, n_iter
-    assert "empty list" in _hints(check_adaptive_ransac(wrong, verbose=False))
+    assert "empty list" in hints(check_adaptive_ransac(wrong, verbose=False))
 
 
 def test_ransac_keeps_the_first_model_not_the_best():
@@ -159,4 +150,4 @@ def test_ransac_keeps_the_first_model_not_the_best():
                 if best is None:                                  # never replaced by a better one
                     best, best_inliers = model, np.asarray(errors(model)) < threshold
         return best, best_inliers, n_iter
-    assert "most inliers" in _hints(check_adaptive_ransac(wrong, verbose=False))
+    assert "most inliers" in hints(check_adaptive_ransac(wrong, verbose=False))

@@ -1,6 +1,7 @@
 """Notebook 05's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex05_sfm import (
     accept_points_reference,
@@ -57,8 +58,7 @@ def accept_points(X, K, R, t, tracks, mask, threshold_px, min_angle_deg, *, vari
                                              (check_accept_points, accept_points),
                                              (check_accept_points, accept_points_reference)])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
+    assert_passes(check, solution)
 
 
 def test_library_next_view_is_the_reference():
@@ -70,16 +70,8 @@ def test_library_next_view_is_the_reference():
     assert check_choose_next_view(via_library, verbose=False).passed
 
 
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
-
-
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    report = check_accept_points(stub)
-    assert not report.written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_accept_points)
 
 
 # --- exercise 1: typical mistakes ---------------------------------------------------------------------------------
@@ -90,7 +82,7 @@ def test_next_view_counts_every_track():
         counts[registered] = -1
         v = int(np.argmax(counts))
         return v if counts[v] >= min_points else None
-    assert "count only the tracks with a point" in _hints(check_choose_next_view(wrong, verbose=False))
+    assert "count only the tracks with a point" in hints(check_choose_next_view(wrong, verbose=False))
 
 
 def test_next_view_keeps_registered_views():
@@ -98,7 +90,7 @@ def test_next_view_keeps_registered_views():
         counts = (seen & np.isfinite(X[:, 0])).sum(1)
         v = int(np.argmax(counts))
         return v if counts[v] >= min_points else None
-    assert "already registered" in _hints(check_choose_next_view(wrong, verbose=False))
+    assert "already registered" in hints(check_choose_next_view(wrong, verbose=False))
 
 
 def test_next_view_argmin():
@@ -106,7 +98,7 @@ def test_next_view_argmin():
         counts = (seen & np.isfinite(X[:, 0])).sum(1)
         counts[registered] = 10 ** 6
         return int(np.argmin(counts))
-    assert "argmax, not argmin" in _hints(check_choose_next_view(wrong, verbose=False))
+    assert "argmax, not argmin" in hints(check_choose_next_view(wrong, verbose=False))
 
 
 def test_next_view_without_minimum():
@@ -114,7 +106,7 @@ def test_next_view_without_minimum():
         counts = (seen & np.isfinite(X[:, 0])).sum(1)
         counts[registered] = -1
         return int(np.argmax(counts))
-    assert "return None" in _hints(check_choose_next_view(wrong, verbose=False))
+    assert "return None" in hints(check_choose_next_view(wrong, verbose=False))
 
 
 def test_next_view_strict_minimum():
@@ -123,7 +115,7 @@ def test_next_view_strict_minimum():
         counts[registered] = -1
         v = int(np.argmax(counts))
         return v if counts[v] > min_points else None
-    assert "exactly min_points" in _hints(check_choose_next_view(wrong, verbose=False))
+    assert "exactly min_points" in hints(check_choose_next_view(wrong, verbose=False))
 
 
 def test_next_view_returns_the_count():
@@ -131,7 +123,7 @@ def test_next_view_returns_the_count():
         counts = (seen & np.isfinite(X[:, 0])).sum(1)
         counts[registered] = -1
         return int(counts.max()) if counts.max() >= min_points else None
-    assert "not its count" in _hints(check_choose_next_view(wrong, verbose=False))
+    assert "not its count" in hints(check_choose_next_view(wrong, verbose=False))
 
 
 # --- exercise 2: typical mistakes ---------------------------------------------------------------------------------
@@ -149,9 +141,9 @@ def test_next_view_returns_the_count():
 def test_accept_points_mistakes(variant, words):
     def wrong(*args):
         return accept_points(*args, variant=variant)
-    assert words in _hints(check_accept_points(wrong, verbose=False))
+    assert words in hints(check_accept_points(wrong, verbose=False))
 
 
 def test_accept_points_wrong_shape():
     report = check_accept_points(lambda X, *args: np.ones((len(X), 1), bool), verbose=False)
-    assert "shape" in _hints(report)
+    assert "shape" in hints(report)

@@ -1,6 +1,7 @@
 """Notebook 12's self-checks: the reference solutions pass, and typical wrong answers get the matching hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written
 
 from labutils.exercises.ex12_stereo import (
     _lr_variant,
@@ -15,18 +16,11 @@ from labutils.stereo import left_right_check, zncc
 @pytest.mark.parametrize("check, func", [(check_zncc_patch, zncc), (check_left_right_consistent, left_right_check),
                                          (check_points_from_disparity, reference_points_from_disparity)])
 def test_reference_passes(check, func):
-    report = check(func, verbose=False)
-    assert report.passed and report.written and len(report.cases) >= 3
+    assert_passes(check, func, min_cases=3)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-
-    for check in (check_zncc_patch, check_left_right_consistent, check_points_from_disparity):
-        report = check(stub)
-        assert not report.written and not report.passed
-    assert capsys.readouterr().out.count("not written yet") == 3
+    assert_stubs_not_written(capsys, check_zncc_patch, check_left_right_consistent, check_points_from_disparity)
 
 
 # --- exercise 1: ZNCC -------------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """Notebook 08's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex08_views import check_pose_covariance, check_pyramid_score
 from labutils.view_selection import pose_covariance, pyramid_score
@@ -46,19 +47,11 @@ def covariance_reference(X, K, R, t, sigma=1.0, *, side="left", through_K=True, 
                                              (check_pose_covariance, covariance_reference),
                                              (check_pose_covariance, pose_covariance)])
 def test_reference_solutions_pass(check, solution):
-    report = check(solution, verbose=False)
-    assert report.passed, report.text()
-
-
-def _hints(report):
-    assert not report.passed
-    return " ".join(report.hints)
+    assert_passes(check, solution)
 
 
 def test_stub_is_reported_as_not_written(capsys):
-    def stub(*args):
-        raise NotImplementedError
-    assert not check_pyramid_score(stub).written and "not written yet" in capsys.readouterr().out
+    assert_stubs_not_written(capsys, check_pyramid_score)
 
 
 # --- exercise 1 ------------------------------------------------------------------------------------------------
@@ -67,13 +60,13 @@ def test_stub_is_reported_as_not_written(capsys):
 def test_pyramid_counts_points():
     def wrong(x, size, levels=6):
         return float(sum(2 ** lv * len(x) for lv in range(1, levels + 1)))
-    assert "not the full cells" in _hints(check_pyramid_score(wrong, verbose=False))
+    assert "not the full cells" in hints(check_pyramid_score(wrong, verbose=False))
 
 
 def test_pyramid_levels_from_zero():
     def wrong(x, size, levels=6):
         return pyramid_reference(x, size, levels) - 2 * 2 ** levels * 0 + _level_zero(x, size, levels)
-    assert "l = 0" in _hints(check_pyramid_score(wrong, verbose=False))
+    assert "l = 0" in hints(check_pyramid_score(wrong, verbose=False))
 
 
 def _level_zero(x, size, levels):
@@ -100,13 +93,13 @@ def test_pyramid_weights_squared_or_missing():
         return sum(len(np.unique(np.clip(np.floor(2 ** lv * x[:, 1] / h), 0, 2 ** lv - 1) * 2 ** lv
                                  + np.clip(np.floor(2 ** lv * x[:, 0] / w), 0, 2 ** lv - 1)))
                    for lv in range(1, levels + 1))
-    assert "K_l²" in _hints(check_pyramid_score(squared, verbose=False))
-    assert "every full cell counts the same" in _hints(check_pyramid_score(unweighted, verbose=False))
+    assert "K_l²" in hints(check_pyramid_score(squared, verbose=False))
+    assert "every full cell counts the same" in hints(check_pyramid_score(unweighted, verbose=False))
 
 
 def test_pyramid_swapped_axes_and_no_clipping():
-    assert "swapped" in _hints(check_pyramid_score(lambda x, size, levels=6: pyramid_reference(x, size[::-1], levels),
-                                                   verbose=False))
+    assert "swapped" in hints(check_pyramid_score(lambda x, size, levels=6: pyramid_reference(x, size[::-1], levels),
+                                                  verbose=False))
 
     def no_clip(x, size, levels=6):
         w, h = size
@@ -117,7 +110,7 @@ def test_pyramid_swapped_axes_and_no_clipping():
             grid[np.floor(K * x[:, 1] / h).astype(int), np.floor(K * x[:, 0] / w).astype(int)] = True
             score += K * grid.sum()
         return score
-    assert "clip the cell index" in _hints(check_pyramid_score(no_clip, verbose=False))
+    assert "clip the cell index" in hints(check_pyramid_score(no_clip, verbose=False))
 
 
 # --- exercise 2 ------------------------------------------------------------------------------------------------
@@ -133,10 +126,10 @@ def test_pyramid_swapped_axes_and_no_clipping():
 def test_covariance_mistakes(kwargs, words):
     def wrong(X, K, R, t, sigma=1.0):
         return covariance_reference(X, K, R, t, sigma, **kwargs)
-    assert words in _hints(check_pose_covariance(wrong, verbose=False))
+    assert words in hints(check_pose_covariance(wrong, verbose=False))
 
 
 def test_covariance_swapped_blocks():
     P = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
-    assert "swapped" in _hints(check_pose_covariance(lambda X, K, R, t, s=1.0: P @ pose_covariance(X, K, R, t, s) @ P,
-                                                     verbose=False))
+    assert "swapped" in hints(check_pose_covariance(lambda X, K, R, t, s=1.0: P @ pose_covariance(X, K, R, t, s) @ P,
+                                                    verbose=False))
