@@ -4,40 +4,28 @@ Each test runs the checkpoint's own cells, read from the notebook by their tags 
 once with the library's function and once with a plausible wrong one bound in its place, at sizes small enough to
 take a few seconds.
 """
-import json
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from _checkpoints import run_cells
 
 from labutils.epipolar import fundamental_8point, hartley_normalisation
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "01_fundamental_matrix.ipynb"
 
 
-def _cells(tag):
-    cells = json.loads(NOTEBOOK.read_text(encoding="utf-8"))["cells"]
-    found = ["".join(c["source"]) for c in cells
-             if c["cell_type"] == "code" and tag in c.get("metadata", {}).get("tags", [])]
-    assert found, f"no cell tagged {tag!r} in {NOTEBOOK.name}"
-    return found
 
 
 @pytest.fixture(scope="module")
 def setup():
     """The namespace after the notebook's setup cell (imports, parameters, the scene)."""
-    ns = {}
-    exec(_cells("setup")[0], ns)
-    return ns
+    return run_cells(NOTEBOOK, "setup", {})
 
 
 def _run(setup, tag, **bindings):
-    ns = dict(setup)
-    ns.update(bindings)
-    for source in _cells(tag):
-        exec(source, ns)
-    return ns
+    return run_cells(NOTEBOOK, tag, dict(setup, **bindings))
 
 
 # --- Hartley's normalisation, checked against its definition ------------------------------------------------------

@@ -7,11 +7,11 @@ a refinement whose Jacobian has the rotation block's sign flipped. The tie with 
 rotation errors within the Monte Carlo spread of a median) must catch both.
 """
 import functools
-import json
 from pathlib import Path
 
 import matplotlib
 import pytest
+from _checkpoints import tagged_cells
 
 import labutils.pnp
 
@@ -21,10 +21,7 @@ N_VIEWS = 12
 TIE = 'assert np.median(o["rot"]) <= np.median(res["cv ITERATIVE"]["rot"]) + tol'
 
 
-def _cells(tag):
-    nb = json.loads(NOTEBOOK.read_text(encoding="utf-8"))
-    return ["".join(c["source"]) for c in nb["cells"]
-            if c["cell_type"] == "code" and tag in c.get("metadata", {}).get("tags", [])]
+_cells = functools.partial(tagged_cells, NOTEBOOK)
 
 
 def _failing_asserts(after_setup=None):

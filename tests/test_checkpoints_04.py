@@ -6,13 +6,13 @@ namespace where one library function is replaced by a wrong one, runs each top-l
 checks that the checkpoint made for that step is among the failing ones — and that nothing fails with the library.
 """
 import ast
-import json
 from pathlib import Path
 from types import SimpleNamespace
 
 import matplotlib
 import numpy as np
 import scipy.sparse as sp
+from _checkpoints import tagged_cells
 
 from labutils.geometry import left_jacobian_so3
 from labutils.reprojection import jacobian_sparsity, reprojection_jacobian, reprojection_residuals
@@ -25,9 +25,7 @@ SCHUR = "assert schur_err < 1e-8"
 
 
 def _cells():
-    nb = json.loads(NOTEBOOK.read_text(encoding="utf-8"))
-    return ["".join(c["source"]) for c in nb["cells"]
-            if c["cell_type"] == "code" and "checkpoint-04" in c.get("metadata", {}).get("tags", [])]
+    return tagged_cells(NOTEBOOK, "checkpoint-04")
 
 
 def _failing_asserts(replace=None):

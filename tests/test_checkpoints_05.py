@@ -5,12 +5,13 @@ copy — once with the library and once with a library function replaced by a pl
 turntable (12 views, so that each run takes a second or two). With the right function the checkpoint passes; with the
 wrong one it raises ``AssertionError``.
 """
-import json
+import functools
 import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _checkpoints import run_cells, tagged_cells
 
 from labutils import make_scene
 from labutils import noise_study as NS
@@ -20,20 +21,10 @@ from labutils.triangulation import triangulate_multiview
 from labutils.twoview import two_view_reconstruction
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "05_incremental_sfm.ipynb"
-CELLS = json.loads(NOTEBOOK.read_text())["cells"]
 
 
-def tagged(tag):
-    """The source of the code cells tagged ``tag``, in notebook order."""
-    found = ["".join(c["source"]) for c in CELLS if c["cell_type"] == "code" and tag in c["metadata"].get("tags", [])]
-    assert found, f"{NOTEBOOK.name} has no cell tagged {tag!r}"
-    return found
-
-
-def run(tag, ns):
-    for k, src in enumerate(tagged(tag)):
-        exec(compile(src, f"{NOTEBOOK.name}[{tag} #{k}]", "exec"), ns)
-    return ns
+tagged = functools.partial(tagged_cells, NOTEBOOK)
+run = functools.partial(run_cells, NOTEBOOK)
 
 
 def small_scene():

@@ -6,13 +6,14 @@ function the checkpoint passes; with the wrong one it raises ``AssertionError``.
 fallback for one camera, a 12-view turntable for the reconstruction) and the trial counts low, so each run takes a few
 seconds; the checks' bands are tied to the trial counts, so they stay fair at these sizes.
 """
-import json
+import functools
 import os
 import types
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _checkpoints import run_cells, tagged_cells
 
 from labutils import make_scene
 from labutils import noise_study as NS
@@ -20,20 +21,10 @@ from labutils.reprojection import camera_params_from_Rt, reprojection_jacobian
 from labutils.sfm import incremental_sfm
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "06_noise_study.ipynb"
-CELLS = json.loads(NOTEBOOK.read_text())["cells"]
 
 
-def tagged(tag):
-    """The source of the code cells tagged ``tag``, in notebook order."""
-    found = ["".join(c["source"]) for c in CELLS if c["cell_type"] == "code" and tag in c["metadata"].get("tags", [])]
-    assert found, f"{NOTEBOOK.name} has no cell tagged {tag!r}"
-    return found
-
-
-def run(tag, ns):
-    for k, src in enumerate(tagged(tag)):
-        exec(compile(src, f"{NOTEBOOK.name}[{tag} #{k}]", "exec"), ns)
-    return ns
+tagged = functools.partial(tagged_cells, NOTEBOOK)
+run = functools.partial(run_cells, NOTEBOOK)
 
 
 def with_ns_module(ns, **replace):
