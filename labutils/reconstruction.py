@@ -8,12 +8,12 @@ from numpy.typing import ArrayLike
 
 from ._cli import write_atomically
 from ._validation import as_array, as_rotations, as_translations
-from .geometry import camera_center
 from .metrics import align_cameras, apply_similarity, pose_errors
+from .scene import CameraRig
 
 
 @dataclass
-class Reconstruction:
+class Reconstruction(CameraRig):
     """Cameras, points and the observations that support them, as built by :func:`incremental_sfm`.
 
     Attributes
@@ -48,10 +48,6 @@ class Reconstruction:
     log: list = field(default_factory=list, repr=False)
 
     @property
-    def n_views(self):
-        return self.R.shape[0]
-
-    @property
     def n_tracks(self):
         return self.X.shape[0]
 
@@ -67,16 +63,6 @@ class Reconstruction:
     @property
     def n_observations(self):
         return int(self.inliers.sum())
-
-    @property
-    def C(self):
-        """(V, 3) camera centres (NaN for unregistered views)."""
-        return camera_center(self.R, self.t)
-
-    @property
-    def P(self):
-        """(V, 3, 4) camera matrices ``K @ [R | t]`` (NaN for unregistered views)."""
-        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
 
     def reprojection_errors(self, tracks):
         """(V, T) reprojection errors in pixels of the inlier observations of ``tracks`` (NaN elsewhere)."""

@@ -14,6 +14,26 @@ class ImageNotReadable(OSError):
     """An image file of a data set cannot be read."""
 
 
+class CameraRig:
+    """What every record with one camera per view shares: ``n_views``, ``P`` and ``C`` from its ``K`` (V, 3, 3),
+    ``R`` (V, 3, 3) and ``t`` (V, 3) (``x_cam = R @ X + t``). A mixin for the records' dataclasses; NaN cameras
+    (unregistered views of a reconstruction) give NaN rows."""
+
+    @property
+    def n_views(self):
+        return self.R.shape[0]
+
+    @property
+    def P(self):
+        """(V, 3, 4) camera matrices ``K @ [R | t]``."""
+        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
+
+    @property
+    def C(self):
+        """(V, 3) camera centres ``-Rᵀ t``."""
+        return camera_center(self.R, self.t)
+
+
 def read_rgb(path):
     """Read an image file as an ``(H, W, 3)`` uint8 RGB array; ``ImageNotReadable`` if it cannot be read."""
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
@@ -168,7 +188,7 @@ class Scene:
 
 
 @dataclass
-class Views:
+class Views(CameraRig):
     """Calibrated images without 3D truth: the cameras of a multi-view data set and its image files.
 
     Attributes
@@ -193,20 +213,6 @@ class Views:
     image_paths: list = field(repr=False)
     image_size: tuple = None
     source: str = "real"
-
-    @property
-    def n_views(self):
-        return self.R.shape[0]
-
-    @property
-    def P(self):
-        """(V, 3, 4) camera matrices ``K @ [R | t]``."""
-        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
-
-    @property
-    def C(self):
-        """(V, 3) camera centres."""
-        return camera_center(self.R, self.t)
 
     def image(self, i):
         """View ``i`` as an RGB ``(H, W, 3)`` uint8 array."""

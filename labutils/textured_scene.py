@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike
 
 from ._validation import as_count, as_points, as_positive, as_rng
 from .carving.synthetic import SNOWMAN
+from .scene import CameraRig
 from .synthetic import look_at
 
 __all__ = ["TexturedScene", "make_textured_scene"]
@@ -22,7 +23,7 @@ _LIGHT = np.array([0.4, -0.3, 0.85]) / np.linalg.norm([0.4, -0.3, 0.85])
 
 
 @dataclass
-class TexturedScene:
+class TexturedScene(CameraRig):
     """Cameras around a striped snowman of spheres, and its images.
 
     Attributes
@@ -48,20 +49,6 @@ class TexturedScene:
     noise: float = 0.0
     name: str = "textured snowman"
     source: str = "synthetic"
-
-    @property
-    def n_views(self):
-        return len(self.R)
-
-    @property
-    def C(self):
-        """(V, 3) camera centres."""
-        return -np.einsum("vji,vj->vi", self.R, self.t)
-
-    @property
-    def P(self):
-        """(V, 3, 4) camera matrices ``K @ [R | t]``."""
-        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
 
     def image(self, i):
         """View ``i`` (like ``Scene.image``)."""

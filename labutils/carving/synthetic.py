@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..scene import CameraRig
 from ..synthetic import look_at
 
 __all__ = ["CarvingScene", "make_snowman", "rays_hit_spheres"]
@@ -22,7 +23,7 @@ SNOWMAN = np.array([[0.0, 0.0, 0.0, 0.30], [0.0, 0.0, 0.40, 0.20], [0.0, 0.0, 0.
 
 
 @dataclass
-class CarvingScene:
+class CarvingScene(CameraRig):
     """Cameras, images and exact silhouettes of a union of spheres.
 
     Attributes
@@ -48,20 +49,6 @@ class CarvingScene:
     spheres: np.ndarray = field(default_factory=lambda: SNOWMAN.copy())
     name: str = "snowman"
     source: str = "synthetic"
-
-    @property
-    def n_views(self):
-        return len(self.R)
-
-    @property
-    def P(self):
-        """(V, 3, 4) camera matrices ``K @ [R | t]``."""
-        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
-
-    @property
-    def C(self):
-        """(V, 3) camera centres."""
-        return -np.einsum("vji,vj->vi", self.R, self.t)
 
     @property
     def box(self):

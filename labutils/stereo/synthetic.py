@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import as_count, as_positive, as_rng
+from ..scene import CameraRig
 from ..synthetic import look_at
 
 __all__ = ["LayeredPair", "make_layered_pair", "SphereScene", "make_textured_spheres"]
@@ -130,7 +131,7 @@ SPHERES = np.array([[0.0, 0.0, 0.0, 0.30], [0.0, 0.0, 0.42, 0.20], [0.22, 0.12, 
 
 
 @dataclass
-class SphereScene:
+class SphereScene(CameraRig):
     """Textured spheres seen by cameras on a ring, with the truth.
 
     Attributes
@@ -154,15 +155,6 @@ class SphereScene:
     spheres: np.ndarray = field(default_factory=lambda: SPHERES.copy())
     name: str = "textured spheres"
     source: str = "synthetic"
-
-    @property
-    def n_views(self):
-        return len(self.R)
-
-    @property
-    def P(self):
-        """(V, 3, 4) camera matrices ``K @ [R | t]``."""
-        return np.einsum("vij,vjk->vik", self.K, np.concatenate([self.R, self.t[..., None]], axis=2))
 
     @property
     def masks(self):
