@@ -13,9 +13,11 @@ then sets the two things that command has no option for:
 - ``filter.nbstripout.extrakeys``: also drop the kernel and language metadata (``metadata.kernelspec``,
   ``metadata.language_info``) that JupyterLab rewrites on every save.
 
-From then on ``git status`` and ``git diff`` compare notebooks without outputs, execution counts or that metadata
-(a notebook you ran and saved shows no change), and ``git add`` stores them stripped. Your working copy keeps its
-outputs. ``--check`` exits 1 if the filter is not set up like this; ``--uninstall`` removes it.
+From then on ``git diff`` compares notebooks without outputs, execution counts or that metadata (a notebook you
+ran and saved shows no change), and ``git add`` stores them stripped. Your working copy keeps its outputs.
+``git status`` may still list a notebook you only ran and saved as modified: git sees the file's size change before
+it asks the filter (a limit of git's clean filters); ``git add`` it, and ``git status`` has nothing to commit.
+``--check`` exits 1 if the filter is not set up like this; ``--uninstall`` removes it.
 """
 import argparse
 import subprocess
@@ -92,7 +94,8 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     print(f"notebook filter set up in {ROOT / '.git'}: git stores notebooks without outputs, execution counts or "
-          "kernel metadata;\nyour working copies keep their outputs, and `git status` ignores them.")
+          "kernel metadata;\nyour working copies keep their outputs, `git diff` ignores them, and `git add` clears a "
+          "notebook that `git status` lists only because you ran it.")
     return 0
 
 

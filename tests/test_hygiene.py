@@ -89,7 +89,7 @@ def _filter_settings():
 @pytest.mark.parametrize("path", CODE_NOTEBOOKS, ids=lambda p: p.split("/")[-1])
 def test_notebook_is_what_the_git_filter_stores(path):
     """Byte for byte what nbstripout (as python -m labutils.notebook_filter sets it up) would store: then a notebook
-    run and saved in JupyterLab shows no change in ``git status``, and ``git add`` changes nothing committed."""
+    run and saved in JupyterLab shows no change in ``git diff``, and ``git add`` changes nothing committed."""
     nbstripout = pytest.importorskip("nbstripout", reason="nbstripout is not installed (pip install -r "
                                                           "environment.txt)")
     nbformat = pytest.importorskip("nbformat")
