@@ -318,6 +318,21 @@ def as_count(value, name, minimum=1):
     return int(value)
 
 
+def as_image_size(image_size, name="image_size", minimum=1):
+    """An image size ``(width, height)`` of two integers ``>= minimum`` (in pixels), as a tuple of ints.
+
+    >>> as_image_size((640, 480.0))
+    (640, 480)
+    >>> as_image_size((480, 640, 3))
+    Traceback (most recent call last):
+    ...
+    ValueError: image_size must be (width, height); got (480, 640, 3)
+    """
+    if np.shape(image_size) != (2,):
+        raise ValueError(f"{name} must be (width, height); got {image_size!r}")
+    return tuple(as_count(v, name, minimum) for v in image_size)
+
+
 def as_tracks(tracks, name="tracks", min_views=1, min_tracks=0):
     """Return a ``(V, T, 2)`` track array (pixels, NaN where a view does not see a track), or ``ValueError``.
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._validation import as_points
+from ._validation import as_image_size, as_points
 from .geometry import angle_axis_from_rotation, left_jacobian_so3, rotation_from_angle_axis
 from .lens import INTRINSIC_NAMES, apply_distortion, as_intrinsics
 from .levenberg_marquardt import levenberg_marquardt
@@ -362,7 +362,7 @@ def calibrate_camera(object_points, image_points, image_size, *, fix_aspect_rati
                                        fix_k3=fix_k3, fix_distortion=fix_distortion, K_init=K_init)
     p, info = levenberg_marquardt(prob.residuals_and_jacobian, p0, max_iter=max_iter, tol=tol)
     _require_convergence(info, max_iter)
-    return _result(prob, p, info, K0, _image_size(image_size), prob.intrinsic_names[0])
+    return _result(prob, p, info, K0, as_image_size(image_size), prob.intrinsic_names[0])
 
 
 def _require_convergence(info, max_iter):
@@ -388,7 +388,7 @@ def calibration_problem(object_points, image_points, image_size, *, fix_aspect_r
         The closed-form K (or ``K_init``).
     """
     Xs, xs = _check_views(object_points, image_points, 3)
-    w, h = _image_size(image_size)
+    w, h = as_image_size(image_size)
     Hs = np.stack([board_homography(X, x) for X, x in zip(Xs, xs)])
     if K_init is None:
         K0 = intrinsics_from_homographies(Hs, zero_skew=True, equal_focal=fix_aspect_ratio, image_size=(w, h))
@@ -399,16 +399,6 @@ def calibration_problem(object_points, image_points, image_size, *, fix_aspect_r
     A, names = _intrinsic_map(theta0, fix_aspect_ratio, fix_principal_point, zero_tangential, fix_k3, fix_distortion)
     prob = CalibrationProblem(*_stack(Xs, xs), theta0[None], [A], [names])
     return prob, prob.pack(board_R=[R for R, _ in poses], board_t=[t for _, t in poses]), K0
-
-
-def _image_size(image_size):
-    try:
-        w, h = (int(v) for v in image_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"image_size must be (width, height); got {image_size!r}") from None
-    if w <= 0 or h <= 0:
-        raise ValueError(f"image_size must be positive; got {(w, h)}")
-    return w, h
 
 
 def _result(prob, p, info, K0, image_size, names):

@@ -19,20 +19,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ._validation import as_array, as_matrix, as_points, as_rotation
+from ._validation import as_array, as_image_size, as_matrix, as_points, as_rotation
 from .lens import as_distortion, as_intrinsics, distort, undistort_points
 
 __all__ = ["remap_grid", "undistort_image", "Rectification", "rectify_fusiello", "rectify_points", "rectify_image"]
-
-
-def _size(image_size):
-    try:
-        w, h = (int(v) for v in image_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"image_size must be (width, height); got {image_size!r}") from None
-    if w <= 0 or h <= 0:
-        raise ValueError(f"image_size must be positive; got {(w, h)}")
-    return w, h
 
 
 def _fold_radius(dist, r_max=3.0):
@@ -78,8 +68,9 @@ def remap_grid(K, dist, image_size, H=None, out_size=None):
     """
     K = as_intrinsics(K)
     dist = as_distortion(dist)
-    _size(image_size)
-    w, h = _size(out_size if out_size is not None else image_size)
+    w, h = as_image_size(image_size)
+    if out_size is not None:
+        w, h = as_image_size(out_size, "out_size")
     Hinv = np.linalg.inv(np.eye(3) if H is None else as_matrix(H, "H", (3, 3)))
     u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
     M = np.linalg.inv(K) @ Hinv
@@ -204,7 +195,7 @@ def rectify_fusiello(K1, K2, R, t, image_size=None):
     f = 0.5 * (K1[1, 1] + K2[1, 1])
     K_new = np.array([[f, 0.0, 0.0], [0.0, f, 0.0], [0.0, 0.0, 1.0]])
     if image_size is not None:
-        w, h = _size(image_size)
+        w, h = as_image_size(image_size)
         centre = np.array([(w - 1) / 2, (h - 1) / 2, 1.0])
         m = []
         for H in (K_new @ R_rect @ np.linalg.inv(K1), K_new @ R_rect @ R.T @ np.linalg.inv(K2)):

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_count, as_points, as_positive, as_rng
+from ._validation import as_count, as_image_size, as_points, as_positive, as_rng
 from .carving.synthetic import SNOWMAN
 from .scene import CameraRig
 from .synthetic import look_at
@@ -184,9 +184,7 @@ def make_textured_scene(n_views: int = 24, *, rng: np.random.Generator, image_si
     noise = as_positive(noise, "noise", allow_zero=True)
     f = as_positive(f, "f")
     spheres = SNOWMAN.copy() if spheres is None else np.asarray(spheres, float).reshape(-1, 4)
-    if np.shape(image_size) != (2,):
-        raise ValueError(f"image_size must be (width, height); got {image_size!r}")
-    w, h = (as_count(v, "image_size", 2) for v in image_size)
+    w, h = as_image_size(image_size, minimum=2)
     K = np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
     target = np.array([0.0, 0.0, 0.3])
     elev = np.deg2rad(np.asarray(elevations, float))

@@ -21,18 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_array, as_count, as_points, as_positive
+from ._validation import as_array, as_image_size, as_points, as_positive
 from .meshing import _as_mesh, vertex_normals
 from .pointcloud import _as_cameras, _as_image, _as_visible, _centres, _project, sample_image
 
 __all__ = ["render_depth", "VertexViews", "vertex_views", "most_frontal_view", "VertexTexture", "texture_vertices",
            "held_out_error", "edge_contrast"]
-
-
-def _as_size(image_size):
-    if np.shape(image_size) != (2,):
-        raise ValueError(f"image_size must be (width, height); got {image_size!r}")
-    return tuple(as_count(v, "image_size", 1) for v in image_size)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -84,7 +78,7 @@ def render_depth(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     if not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise ValueError("R and t must be finite (one registered view)")
     Ks, Rs, ts, _ = _as_cameras(K, R[None], t[None])
-    w, h = _as_size(image_size)
+    w, h = as_image_size(image_size)
     x, z = _project(Ks[0], Rs[0], ts[0], V)
     if np.any(z[F] <= 0):
         raise ValueError("a vertex of the mesh is at or behind the camera's plane: render_depth needs the whole mesh "

@@ -128,6 +128,19 @@ def test_calibrate_camera_rejects_bad_input():
         calibrate_camera([v.X] * 3, [v.x[0][:-1]] + v.x[1:], v.image_size)
     with pytest.raises(ValueError, match="image_size"):
         calibrate_camera([v.X] * 3, v.x, (640,))
+    with pytest.raises(ValueError, match="image_size must be an integer >= 1; got 640.5"):
+        calibrate_camera([v.X] * 3, v.x, (640.5, 480))          # was truncated to 640 without a word
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    ({"image_size": (640.5, 480)}, "image_size must be an integer"),
+    ({"image_size": (640, 0)}, "image_size must be an integer >= 1; got 0"),
+    ({"image_size": (480, 640, 3)}, r"image_size must be \(width, height\)"),
+    ({"image_size": (640, 480), "out_size": (320.5, 240)}, "out_size must be an integer"),
+])
+def test_remap_grid_refuses_a_bad_size(kwargs, words):
+    with pytest.raises(ValueError, match=words):
+        remap_grid(np.diag([500.0, 500.0, 1.0]), np.zeros(5), **kwargs)
 
 
 def test_detect_corners_bad_input_and_missing_board():

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from skimage.measure import marching_cubes
 
-from .._validation import as_points
+from .._validation import as_image_size, as_points
 from .silhouettes import _as_number, clean_mask, mask_iou, signed_distance_map
 from .voxels import (
     Carving,
@@ -117,9 +117,7 @@ def render_silhouette(vertices: ArrayLike, faces: ArrayLike, P: ArrayLike, image
         raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
     if F.size and (F.min() < 0 or F.max() >= len(V)):
         raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
-    if np.shape(image_size) != (2,):
-        raise ValueError(f"image_size must be (width, height); got {image_size!r}")
-    w, h = (_as_number(v, "image_size", lo=1, integer=True) for v in image_size)
+    w, h = as_image_size(image_size)
     if F.size == 0:
         return np.zeros((h, w), bool)
     x, depth = project_with_depth(P, V)
