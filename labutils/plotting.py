@@ -2,6 +2,7 @@
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
+from .geometry import camera_center
 from .metrics import align_cameras
 
 
@@ -152,8 +153,8 @@ def plot_pose_errors_topview(ax, R_true, t_true, R_est, t_est, magnify=50.0, axi
     R_true, t_true = np.asarray(R_true, float), np.asarray(t_true, float)
     ok = np.all(np.isfinite(R_est), axis=(1, 2)) & np.all(np.isfinite(t_est), axis=1)
     R_al, t_al, _ = align_cameras(np.asarray(R_est)[ok], np.asarray(t_est)[ok], R_true[ok], t_true[ok])
-    C = -np.einsum("vji,vj->vi", R_true, t_true)
-    C_al = -np.einsum("vji,vj->vi", R_al, t_al)
+    C = camera_center(R_true, t_true)
+    C_al = camera_center(R_al, t_al)
     scale = axis_len * np.sqrt(((C - C.mean(0)) ** 2).sum(1).mean())
     C_show = C[ok] + magnify * (C_al - C[ok])
     z_true, z_al = R_true[:, 2], R_al[:, 2]              # viewing directions (third rows of R)
@@ -368,7 +369,7 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
     C = None
     if R is not None:
         R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
-        C = -np.einsum("vji,vj->vi", R, t)
+        C = camera_center(R, t)
     scale = frustum_scale or 0.05 * _scene_size(X, C)
     segments = None
     if R is not None:
@@ -488,7 +489,7 @@ def plot_cameras_and_points(ax, R=None, t=None, X=None, number_every=6, scale=0.
     if R is not None:
         R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
         plot_cameras(ax, R, t, scale=scale, color=color)
-        C = -np.einsum("vji,vj->vi", R, t)
+        C = camera_center(R, t)
         centre = C.mean(0)
         for i in range(0, len(C), max(1, int(number_every))):
             out = C[i] - centre

@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from ._validation import as_array, as_calibration, as_count, as_points, as_rotations, as_translations
+from .geometry import camera_center
 from .ply import write_points
 
 __all__ = ["LocalPCA", "PointCloud", "local_pca", "estimate_normals", "orient_normals", "facing_fractions",
@@ -82,11 +83,6 @@ def _as_visible(visible, n_views, n_points, registered, name="visible", views="R
         raise ValueError(f"{name}: view {int(np.flatnonzero(~registered)[ghost][0])} is not registered (NaN pose) "
                          "but sees points")
     return vis
-
-
-def _centres(R, t):
-    """(V, 3) camera centres ``-Rᵀ t`` (NaN for unregistered views)."""
-    return -np.einsum("vji,vj->vi", R, t)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -239,7 +235,7 @@ def orient_normals(X: ArrayLike, normals: ArrayLike, R: ArrayLike, t: ArrayLike,
     if unseen.any():
         raise ValueError(f"point {int(np.flatnonzero(unseen)[0])} is seen by no view ({int(unseen.sum())} such "
                          "points): visibility cannot orient its normal")
-    C = _centres(R, t)
+    C = camera_center(R, t)
     d = C[None, :, :] - X[:, None, :]
     dist = np.linalg.norm(np.where(visible.T[:, :, None], d, 1.0), axis=-1)
     if np.any(dist == 0):
@@ -269,7 +265,7 @@ def facing_fractions(X: ArrayLike, normals: ArrayLike, R: ArrayLike, t: ArrayLik
     seen = visible.any(axis=0)
     if not seen.any():
         raise ValueError("no point is seen by any view")
-    cos = np.einsum("nvi,ni->nv", _view_directions(X, _centres(R, t), visible), normals)
+    cos = np.einsum("nvi,ni->nv", _view_directions(X, camera_center(R, t), visible), normals)
     faces = (cos > 0) & visible.T
     return {"any": float(faces.any(axis=1)[seen].mean()),
             "all": float((faces | ~visible.T).all(axis=1)[seen].mean()),

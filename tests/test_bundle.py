@@ -3,7 +3,7 @@ import pytest
 import scipy.sparse as sp
 
 from labutils.bundle import bundle_adjust, bundle_adjust_params
-from labutils.geometry import left_jacobian_so3, rotation_from_angle_axis, skew
+from labutils.geometry import camera_center, left_jacobian_so3, rotation_from_angle_axis, skew
 from labutils.metrics import ml_residual_bound, pose_errors
 from labutils.reprojection import (
     Rt_from_camera_params,
@@ -159,8 +159,8 @@ def test_one_fixed_camera_is_the_anchor(rng):
     res = bundle_adjust(R0, t0, X0, ci, pi, x, s.K, fixed_cameras=[2], tol=1e-12)
     assert res.gauge["anchor"] == 2 and res.gauge["scale_camera"] == 0
     assert np.abs(res.R[2] - R0[2]).max() < 1e-15 and np.abs(res.t[2] - t0[2]).max() < 1e-15
-    C = -np.einsum("vji,vj->vi", res.R, res.t)
-    C0 = -np.einsum("vji,vj->vi", R0, t0)
+    C = camera_center(res.R, res.t)
+    C0 = camera_center(R0, t0)
     assert abs(np.linalg.norm(C[0] - C[2]) - np.linalg.norm(C0[0] - C0[2])) < 1e-12
     assert pose_errors(res.R, res.t, s.R, s.t)[0].max() < 1e-6 and res.n_free == 4 * 6 - 1 + 3 * 60
 

@@ -9,6 +9,7 @@ from labutils.exercises.ex05_sfm import (
     check_choose_next_view,
     next_view_reference,
 )
+from labutils.geometry import camera_center
 from labutils.sfm import next_view
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
@@ -33,7 +34,7 @@ def accept_points(X, K, R, t, tracks, mask, threshold_px, min_angle_deg, *, vari
         Xc = R[views] @ X[k] + t[views]
         q = Xc @ K.T
         err = np.linalg.norm(q[:, :2] / q[:, 2:] - tracks[views, k], axis=1)
-        C = -np.einsum("vji,vj->vi", R[views], t[views])
+        C = camera_center(R[views], t[views])
         rays = X[k] - C
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
         cos = np.clip(rays @ rays.T, -1, 1)

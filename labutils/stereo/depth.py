@@ -25,7 +25,7 @@ from .._validation import (
     as_translations,
     as_vector3,
 )
-from ..geometry import relative_pose
+from ..geometry import camera_center, relative_pose
 from ..rectification import Rectification, rectify_fusiello
 from .disparity import disparity_plane_sweep, left_right_check
 
@@ -361,7 +361,7 @@ def ring_pairs(R: ArrayLike, t: ArrayLike, target: ArrayLike, *, min_angle_deg: 
     hi = as_positive(max_angle_deg, "max_angle_deg")
     if hi <= lo:
         raise ValueError(f"max_angle_deg must exceed min_angle_deg; got {min_angle_deg!r} and {max_angle_deg!r}")
-    C = -np.einsum("vji,vj->vi", R, t)
+    C = camera_center(R, t)
     u = C - target
     norms = np.linalg.norm(u, axis=1)
     if np.any(norms <= 0):
