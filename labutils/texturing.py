@@ -22,8 +22,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import as_array, as_image_size, as_points, as_positive
+from .geometry import camera_center
 from .meshing import _as_mesh, vertex_normals
-from .pointcloud import _as_cameras, _as_image, _as_visible, _centres, _project, sample_image
+from .pointcloud import _as_cameras, _as_image, _as_visible, _project, sample_image
 
 __all__ = ["render_depth", "VertexViews", "vertex_views", "most_frontal_view", "VertexTexture", "texture_vertices",
            "held_out_error", "edge_contrast"]
@@ -225,7 +226,7 @@ def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
         normals = as_points(normals, "normals", dim=3, like=(V, "vertices"))
         if np.any(np.abs(np.linalg.norm(normals, axis=1) - 1) > 1e-6):
             raise ValueError("normals must be unit vectors")
-    C = _centres(R, t)
+    C = camera_center(R, t)
     n_v, n = len(R), len(V)
     inside = np.zeros((n_v, n), bool)
     visible = np.zeros((n_v, n), bool)
