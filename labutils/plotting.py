@@ -143,7 +143,7 @@ def plot_noise_study(ax, study, pred=None, which="rot", color="C0", label=None, 
     ax.set_xticklabels([f"{x:g}" for x in s[pos]])
     ax.set_xticks([], minor=True)
     ax.set_xlabel("pixel noise σ (px)")
-    ax.set_ylabel("rotation error (deg)" if which == "rot" else "centre error / scene size")
+    ax.set_ylabel("rotation error (°)" if which == "rot" else "centre error / scene size")
     return ax
 
 

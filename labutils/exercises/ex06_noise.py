@@ -96,7 +96,7 @@ def _diagnose_crb(out, J, sigma):
 
 
 def check_cramer_rao_pose(cramer_rao_pose, verbose=True):
-    """Self-check of ``cramer_rao_pose(J, sigma) -> (cov, rot_rms_deg)`` (H&Z Sec. 5.2.3).
+    """Self-check of ``cramer_rao_pose(J, sigma) -> (cov, rot_rms_deg)`` (H&Z Sec. 5.2.2, backward propagation).
 
     Cases: a camera at σ = 1 px against :func:`labutils.noise_study.pose_covariance`, the same at σ = 0.5 and 2 px
     (the covariance scales as σ²), and a camera seeing a small patch (strongly correlated rotation and translation).

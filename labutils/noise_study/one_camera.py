@@ -23,7 +23,7 @@ from ..pnp import pnp_ransac, pose_jacobian
 
 
 def pose_covariance(X, K, R, t, sigma=1.0):
-    """The Cramér–Rao bound for one camera's pose from known points: ``σ² (JᵀJ)⁻¹`` (H&Z Sec. 5.2.3).
+    """The Cramér–Rao bound for one camera's pose from known points: ``σ² (JᵀJ)⁻¹`` (H&Z Sec. 5.2.2).
 
     With residuals ``r = u(θ) - x`` and pixels ``x = x_true + ε`` (ε Gaussian, σ per coordinate), the least-squares
     pose is off by ``δθ = (JᵀJ)⁻¹ Jᵀ ε`` to first order, with covariance ``σ² (JᵀJ)⁻¹``; no unbiased estimator does
