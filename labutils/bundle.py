@@ -120,6 +120,15 @@ class BundleResult:
         """Number of free parameters ``d`` (after the gauge)."""
         return int(self.free.sum())
 
+    def cost_text(self):
+        """``'a -> b px² in n iterations'`` for a log line. With a robust loss: the robust cost the solver lowered,
+        and in brackets the plain ``½ Σ r²``, which a robust solve may raise."""
+        it = f"in {self.n_iter} iterations"
+        if self.loss_cost_initial == self.cost_initial and self.loss_cost_final == self.cost_final:
+            return f"{self.cost_initial:.4g} -> {self.cost_final:.4g} px² {it}"
+        return (f"robust cost {self.loss_cost_initial:.4g} -> {self.loss_cost_final:.4g} "
+                f"(½Σr² {self.cost_initial:.4g} -> {self.cost_final:.4g} px²) {it}")
+
     def summary(self):
         """A JSON-friendly dict of the scalar results."""
         return dict(solver=self.solver, cost_initial=self.cost_initial, cost_final=self.cost_final,

@@ -289,7 +289,7 @@ def global_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, thr
     t0 = time.perf_counter()
     ba = dict(loss=ba_loss, f_scale=f_scale, max_iter=max_iter)
     R, t, _, res = _adjust(tracks, Ks, R, t, X, inl, reg, **ba)
-    note(f"BA from the linear start: {res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations")
+    note(f"BA from the linear start: {res.cost_text()}")
     X, used = _triangulate(tracks, Ks, R, t, reg, threshold_px, min_angle_deg)
     # views the pairs could not place (too few tracks shared with any one view): by PnP, as incremental SfM does
     for _ in range(V):
@@ -303,8 +303,8 @@ def global_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, thr
     err = masked_reprojection_errors(Ks, np.nan_to_num(R), np.nan_to_num(t), np.nan_to_num(X), tracks, used)
     inliers = used & (err <= threshold_px)
     timings["bundle_adjustment"] = time.perf_counter() - t0
-    note(f"BA after triangulating every track: {int(np.isfinite(X[:, 0]).sum())} points, {res.cost_initial:.4g} -> "
-         f"{res.cost_final:.4g} px² in {res.n_iter} iterations; {int((used & ~inliers).sum())} observations beyond "
+    note(f"BA after triangulating every track: {int(np.isfinite(X[:, 0]).sum())} points, {res.cost_text()}; "
+         f"{int((used & ~inliers).sum())} observations beyond "
          f"{threshold_px:g} px")
     missing = np.flatnonzero(~reg)
     if missing.size:

@@ -109,10 +109,10 @@ def _bundle(st, cams, pts, fixed, *, loss, f_scale, max_iter, tol=1e-8):
 
 
 def _cost_text(res):
-    """'a -> b px² in n iterations' for a BA result, or a note that there was nothing to adjust."""
+    """:meth:`BundleResult.cost_text`, or a note that there was nothing to adjust."""
     if res is None:
         return "nothing to adjust (no observations)"
-    return f"{res.cost_initial:.4g} -> {res.cost_final:.4g} px² in {res.n_iter} iterations"
+    return res.cost_text()
 
 
 def _filter(st, threshold_px, min_angle_deg, readmit=False):
