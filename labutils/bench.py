@@ -175,7 +175,8 @@ def time_per_iteration(R0: np.ndarray, t0: np.ndarray, tracks: np.ndarray, K: np
 
     Each solver runs ``n_iter`` iterations (plain least squares) on :func:`subproblem` of each size; the time of a
     run divided by its iterations (Jacobian evaluations: scipy counts a rejected step as a residual evaluation
-    only, so it may report fewer) is one point. A dense solver's iteration grows like the cube of the number of
+    only, so it may report fewer) is one point. A dense solver's iteration grows between the square (finite
+    differences, one residual evaluation per parameter) and the cube (the dense factorisation) of the number of
     parameters, a sparse one's about linearly.
 
     Parameters
