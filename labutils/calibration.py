@@ -352,7 +352,7 @@ def calibrate_camera(object_points, image_points, image_size, *, fix_aspect_rati
     Examples
     --------
     >>> from labutils.chessboard import board_points, synthetic_board_views
-    >>> views = synthetic_board_views(np.random.default_rng(0), n_views=6, noise_px=0.0)
+    >>> views = synthetic_board_views(n_views=6, noise_px=0.0, rng=np.random.default_rng(0))
     >>> cal = calibrate_camera([views.X] * 6, views.x_true, views.image_size)
     >>> bool(np.allclose(cal.K, views.K, rtol=1e-8) and np.allclose(cal.dist, views.dist, atol=1e-8))
     True

@@ -198,7 +198,7 @@ def _random_board_pose(rng, K, dist, image_size, board, square, min_dist, max_di
     raise ValueError("could not place the board inside the image: make the board smaller or the distances larger")
 
 
-def synthetic_board_views(rng, n_views=12, noise_px=0.1, *, K=None, dist=None, board=(9, 6), square=0.025,
+def synthetic_board_views(n_views=12, noise_px=0.1, *, rng, K=None, dist=None, board=(9, 6), square=0.025,
                           image_size=(640, 480), distance=(0.3, 0.5), max_tilt_deg=45.0, margin_px=12.0, _also=None):
     """Random board poses, as a person photographing a board would take them, with exact corner projections.
 
@@ -208,10 +208,11 @@ def synthetic_board_views(rng, n_views=12, noise_px=0.1, *, K=None, dist=None, b
 
     Parameters
     ----------
-    rng : numpy.random.Generator
     n_views : int
     noise_px : float
         Standard deviation of the Gaussian noise added to each corner coordinate for ``x``.
+    rng : numpy.random.Generator
+        The poses and the noise (keyword-only, required).
     K, dist : optional
         The camera (default :data:`DEFAULT_K`, :data:`DEFAULT_DIST`); zero skew.
 
@@ -223,7 +224,7 @@ def synthetic_board_views(rng, n_views=12, noise_px=0.1, *, K=None, dist=None, b
 
     Examples
     --------
-    >>> v = synthetic_board_views(np.random.default_rng(0), n_views=3, noise_px=0.0)
+    >>> v = synthetic_board_views(n_views=3, noise_px=0.0, rng=np.random.default_rng(0))
     >>> v.n_views, v.x[0].shape, bool(np.allclose(v.x[0], v.x_true[0]))
     (3, (54, 2), True)
     """
@@ -288,7 +289,7 @@ def render_board(K, dist, R, t, *, board=(9, 6), square=0.025, image_size=(640, 
 
     Examples
     --------
-    >>> v = synthetic_board_views(np.random.default_rng(1), n_views=1, noise_px=0.0)
+    >>> v = synthetic_board_views(n_views=1, noise_px=0.0, rng=np.random.default_rng(1))
     >>> img = render_board(v.K, v.dist, v.R[0], v.t[0])
     >>> img.shape, img.dtype, bool(np.abs(detect_corners(img) - v.x_true[0]).max() < 0.3)
     ((480, 640), dtype('uint8'), True)
@@ -334,7 +335,7 @@ def render_board(K, dist, R, t, *, board=(9, 6), square=0.025, image_size=(640, 
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
-def render_board_views(views, *, supersample=8, noise=2.0, rng=None):
+def render_board_views(views, *, rng, supersample=8, noise=2.0):
     """Render every view of synthetic :class:`BoardViews` (:func:`render_board`), sharing the pixel rays."""
     if views.K is None:
         raise ValueError("views must be synthetic (with K, dist, R, t): real views already have images")
@@ -401,7 +402,7 @@ def _same_order(x, x_true):
     return x[::-1].copy() if np.abs(x[::-1] - x_true).max() < np.abs(x - x_true).max() else x
 
 
-def synthetic_stereo_views(rng, n_views=13, *, noise=2.0, verbose=False):
+def synthetic_stereo_views(n_views=13, *, rng, noise=2.0, verbose=False):
     """Rendered views of the 9×6 board by a stereo rig with known truth, detected like real photos.
 
     Camera 1 is :data:`DEFAULT_K`, :data:`DEFAULT_DIST`; camera 2 is ``RIG_K2, RIG_DIST2`` at ``x_cam2 = RIG_R @
@@ -415,7 +416,7 @@ def synthetic_stereo_views(rng, n_views=13, *, noise=2.0, verbose=False):
         ``source='synthetic'``, with images, detected corners ``x`` and the truth (``right.R, right.t`` are the
         board poses in camera 2).
     """
-    left = synthetic_board_views(rng, n_views, 0.0, distance=(0.3, 0.45), max_tilt_deg=50,
+    left = synthetic_board_views(n_views, 0.0, rng=rng, distance=(0.3, 0.45), max_tilt_deg=50,
                                  _also=(RIG_K2, RIG_DIST2, RIG_R, RIG_T))
     R2, t2 = RIG_R @ left.R, left.t @ RIG_R.T + RIG_T
     right = BoardViews(X=left.X, x=[], names=[f"right{v:02d}" for v in range(n_views)], image_size=left.image_size,
@@ -433,7 +434,7 @@ def synthetic_stereo_views(rng, n_views=13, *, noise=2.0, verbose=False):
     return left, right
 
 
-def load_stereo_chessboard(rng, verbose=True):
+def load_stereo_chessboard(*, rng, verbose=True):
     """The OpenCV sample stereo views if they are on the data path, else :func:`synthetic_stereo_views` (and say so).
 
     Returns
@@ -457,7 +458,7 @@ def load_stereo_chessboard(rng, verbose=True):
         if verbose:
             print(f"{str(exc).splitlines()[0]}\nusing synthetic views instead: a rendered stereo rig with known K, "
                   "distortion and poses")
-        return synthetic_stereo_views(rng)
+        return synthetic_stereo_views(rng=rng)
 
 
 def grid_line_residuals(x, board=(9, 6)):

@@ -45,7 +45,7 @@ def look_at(C: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) ->
     return R, -R @ C
 
 
-def blob_texture(size: int, rng: np.random.Generator, n_blobs: int = 400,
+def blob_texture(size: int, *, rng: np.random.Generator, n_blobs: int = 400,
                  radius: tuple[float, float] = (0.006, 0.05)) -> np.ndarray:
     """A grey texture of random discs and rectangles at several scales, lightly blurred: many SIFT blobs.
 
@@ -64,7 +64,7 @@ def blob_texture(size: int, rng: np.random.Generator, n_blobs: int = 400,
 
     Examples
     --------
-    >>> blob_texture(64, np.random.default_rng(0)).shape
+    >>> blob_texture(64, rng=np.random.default_rng(0)).shape
     (64, 64)
     """
     import cv2
@@ -210,7 +210,7 @@ def render_corner(n_views: int = 6, image_size: tuple[int, int] = (320, 240), *,
         R, t = look_at([distance * np.cos(a), distance * np.sin(a), height], target)
         Rs.append(R)
         ts.append(t)
-    textures = [blob_texture(texture_px, rng, n_blobs=n_blobs, radius=radius) for _ in CORNER_FACES]
+    textures = [blob_texture(texture_px, rng=rng, n_blobs=n_blobs, radius=radius) for _ in CORNER_FACES]
     S = texture_px
     M = np.array([[1.0 / S, 0.0, 0.5 / S], [0.0, 1.0 / S, 0.5 / S], [0.0, 0.0, 1.0]])   # texture px -> (u, v)
     images, labels = [], []

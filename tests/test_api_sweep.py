@@ -46,7 +46,7 @@ BLOCKS = (np.random.default_rng(7).uniform(size=(12, 16)) > 0.5).astype(np.uint8
 TEXTURE = np.kron(BLOCKS, np.ones((4, 4), np.uint8))                   # 48 x 64, black and white blocks: corners
 DIST = np.array([-0.2, 0.05, 0.001, -0.001, 0.0])
 XN = np.random.default_rng(6).uniform(-0.4, 0.4, (10, 2))
-BV = synthetic_board_views(np.random.default_rng(0), n_views=4, noise_px=0.0, board=(5, 4))
+BV = synthetic_board_views(rng=np.random.default_rng(0), n_views=4, noise_px=0.0, board=(5, 4))
 OBJ = [BV.X] * 4
 R_RIG, T_RIG = lu.rotation_from_angle_axis([0.0, 0.05, 0.0]), np.array([-0.1, 0.0, 0.0])
 X_RIG = [project_points(BV.X, BV.K, BV.dist, R_RIG @ R, R_RIG @ t + T_RIG) for R, t in zip(BV.R, BV.t)]

@@ -137,6 +137,42 @@ def test_public_names_resolve():
         labutils.no_such_name  # noqa: B018
 
 
+# Where ``rng`` may be left out, and why: the function draws nothing unless asked to.
+RNG_OPTIONAL = {
+    "labutils._validation.as_rng": "the check of an rng argument itself",
+    "labutils.chessboard.render_board": "a noise-free drawing by default; noise > 0 without rng is a ValueError",
+    "labutils.plotting.show_reconstruction": "random only for a display subset; without rng the first max_points",
+}
+
+
+def _every_module():
+    import pkgutil
+    return [importlib.import_module(m.name) for m in pkgutil.walk_packages(labutils.__path__, "labutils.")
+            if not m.name.endswith("__main__")]
+
+
+def test_every_module_imports_and_rng_is_keyword_only_and_required():
+    """Every module imports; every public function (and public method) with an ``rng`` takes it keyword-only and
+    without a default, so no call can fall back to a hidden global state or bind a seed by position."""
+    import inspect
+    wrong = []
+    for mod in _every_module():
+        for name, obj in vars(mod).items():
+            if name.startswith("_") or getattr(obj, "__module__", None) != mod.__name__:
+                continue
+            funcs = [(name, obj)] if inspect.isfunction(obj) else \
+                [(f"{name}.{k}", v) for k, v in vars(obj).items() if inspect.isfunction(v) and not k.startswith("_")] \
+                if inspect.isclass(obj) else []
+            for qual, f in funcs:
+                p = inspect.signature(f).parameters.get("rng")
+                where = f"{mod.__name__}.{qual}"
+                if p is not None and where not in RNG_OPTIONAL and (p.kind is not p.KEYWORD_ONLY or
+                                                                     p.default is not p.empty):
+                    wrong.append(f"{where}: rng is {p.kind.name.lower()}"
+                                 + ("" if p.default is p.empty else f" with default {p.default!r}"))
+    assert not wrong, "rng must be keyword-only and required (def f(..., *, rng)):\n" + "\n".join(wrong)
+
+
 def test_command_lines_do_not_warn():
     """``python -m labutils.X --help`` exits 0 and prints no RuntimeWarning ('found in sys.modules')."""
     for cmd in ("sfm", "bundle", "bench", "data", "notebook_filter", "calibrate", "carve", "match"):

@@ -66,7 +66,7 @@ def right():
 def rendered():
     """16 rendered views of the 9x6 board (known K, distortion, poses) and their detected corners."""
     rng = np.random.default_rng(2024)
-    views = synthetic_board_views(rng, n_views=16, noise_px=0.0, distance=(0.22, 0.35), max_tilt_deg=60)
+    views = synthetic_board_views(rng=rng, n_views=16, noise_px=0.0, distance=(0.22, 0.35), max_tilt_deg=60)
     images = render_board_views(views, noise=2.0, rng=rng)
     return views, images, [detect_corners(img) for img in images]
 
@@ -115,7 +115,7 @@ def test_board_homography_and_zhang_reject_bad_input():
 
 
 def test_calibrate_camera_rejects_bad_input():
-    v = synthetic_board_views(np.random.default_rng(0), n_views=3, noise_px=0.0)
+    v = synthetic_board_views(rng=np.random.default_rng(0), n_views=3, noise_px=0.0)
     with pytest.raises(ValueError, match="at least 3 are needed"):
         calibrate_camera([v.X] * 2, v.x[:2], v.image_size)
     with pytest.raises(ValueError, match="object_points has 3 views but image_points has 2"):
@@ -191,7 +191,7 @@ def test_undistort_round_trip(rng):
 
 
 def _problem(rng, n_cams=1, free=True):
-    v = synthetic_board_views(rng, n_views=3, noise_px=0.3)
+    v = synthetic_board_views(rng=rng, n_views=3, noise_px=0.3)
     X = np.vstack([v.X] * 3 * n_cams)
     x = np.vstack(v.x * n_cams)
     view = np.tile(np.repeat(np.arange(3), len(v.X)), n_cams)
@@ -267,10 +267,10 @@ def test_remap_grid_keeps_the_skew():
 # --- recovery of synthetic truth --------------------------------------------------------------------------------
 
 def test_noise_free_views_give_the_truth_exactly(rng):
-    v = synthetic_board_views(rng, n_views=5, noise_px=0.0)
+    v = synthetic_board_views(rng=rng, n_views=5, noise_px=0.0)
     Hs = np.stack([board_homography(v.X, x) for x in v.x])
     # Zhang's closed form ignores the distortion: exact only without it
-    v0 = synthetic_board_views(rng, n_views=5, noise_px=0.0, dist=np.zeros(5))
+    v0 = synthetic_board_views(rng=rng, n_views=5, noise_px=0.0, dist=np.zeros(5))
     H0 = np.stack([board_homography(v0.X, x) for x in v0.x])
     assert k_error(intrinsics_from_homographies(H0, zero_skew=True), v0.K) < 1e-9
     R, t = pose_from_homography(H0[0], v0.K)
@@ -290,7 +290,7 @@ def test_noisy_corners_recover_K_to_a_tenth_of_a_percent():
     inside the area the board covered, in normalised coordinates (1e-3 ≈ 0.5 px).
     """
     rng = np.random.default_rng(7)
-    v = synthetic_board_views(rng, n_views=60, noise_px=0.1, board=(12, 9), square=0.02, distance=(0.22, 0.35),
+    v = synthetic_board_views(rng=rng, n_views=60, noise_px=0.1, board=(12, 9), square=0.02, distance=(0.22, 0.35),
                               max_tilt_deg=60)
     cal = calibrate_camera([v.X] * 60, v.x, v.image_size)
     sd = np.array([cal.std[k] for k in ("fx", "fy", "cx", "cy")])
@@ -337,7 +337,7 @@ def test_view_influence_shares_sum_to_one(rendered):
 
 
 def test_stereo_calibration_recovers_the_rig(rng):
-    v = synthetic_board_views(rng, n_views=8, noise_px=0.0, distance=(0.4, 0.5), max_tilt_deg=35)
+    v = synthetic_board_views(rng=rng, n_views=8, noise_px=0.0, distance=(0.4, 0.5), max_tilt_deg=35)
     R_rig = rotation_from_angle_axis([0.01, -0.04, 0.005])
     t_rig = np.array([-0.06, 0.001, 0.002])
     K2 = np.array([[545.0, 0, 318], [0, 541, 244], [0, 0, 1]])
@@ -517,7 +517,7 @@ def test_render_board_is_the_camera_model(rendered):
 def test_synthetic_stereo_views_are_consistent():
     """The notebook's fallback: both cameras see every board, corners in board order, the rig as documented."""
     from labutils.chessboard import RIG_R, RIG_T, synthetic_stereo_views
-    left_s, right_s = synthetic_stereo_views(np.random.default_rng(3), n_views=3)
+    left_s, right_s = synthetic_stereo_views(n_views=3, rng=np.random.default_rng(3))
     for views in (left_s, right_s):
         assert len(views.images) == 3 and views.source == "synthetic"
         for x, xt in zip(views.x, views.x_true):
@@ -535,6 +535,6 @@ def test_large_images_are_searched_small_and_refined_at_full_size(rendered):
 
 
 def test_refinement_that_does_not_converge_is_an_error():
-    v = synthetic_board_views(np.random.default_rng(5), n_views=4, noise_px=0.2)
+    v = synthetic_board_views(rng=np.random.default_rng(5), n_views=4, noise_px=0.2)
     with pytest.raises(ValueError, match="did not converge in 2 iterations"):
         calibrate_camera([v.X] * 4, v.x, v.image_size, max_iter=2)
