@@ -3,6 +3,7 @@ import numpy as np
 
 from .chessboard import grid_line_residuals
 from .lens import distort, undistort_points
+from .plotting import few_ticks
 
 
 def plot_corners(ax, x, board=(9, 6), image=None, image_size=None, color="C1", size=12, label=None):
@@ -120,4 +121,5 @@ def plot_board_poses(ax, R, t, board=(9, 6), square=0.025, names=None, camera_si
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z, forward (m)")
     ax.set_zlabel("-y, up (m)")
-    return ax
+    ax.tick_params(labelsize=7)
+    return few_ticks(ax, 4)                        # the metre ticks of a 3D axis overlap otherwise
