@@ -218,6 +218,19 @@ def test_robust_loss_resists_outliers_and_solvers_agree(rng):
         robust_cost(robust["lm-schur"].residuals, "cauchy", 1.0))
 
 
+def test_cost_text_names_the_robust_cost_that_was_lowered(rng):
+    """The log line of a robust BA gives the cost it minimised (which must fall) and the plain one in brackets."""
+    s = make_scene(60, 4, noise_px=0.5, outlier_ratio=0.1, rng=rng)
+    ci, pi, x = observations(s.x_meas)
+    plain = bundle_adjust(s.R, s.t, s.X, ci, pi, x, s.K)
+    assert plain.cost_text().startswith(f"{plain.cost_initial:.4g} -> {plain.cost_final:.4g} px² in ")
+    robust = bundle_adjust(s.R, s.t, s.X, ci, pi, x, s.K, loss="cauchy", f_scale=1.0)
+    text = robust.cost_text()
+    assert robust.loss_cost_final < robust.loss_cost_initial
+    assert text.startswith(f"robust cost {robust.loss_cost_initial:.4g} -> {robust.loss_cost_final:.4g} (½Σr² ")
+    assert f"{robust.cost_initial:.4g} -> {robust.cost_final:.4g} px²) in {robust.n_iter} iterations" in text
+
+
 def test_bal_model_solvers_agree_and_intrinsics_option(rng):
     cp, X, ci, pi, x = bal_problem(rng, n_points=80, n_views=5, noise_px=0.5)
     cp0 = cp.copy()
