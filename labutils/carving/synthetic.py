@@ -22,6 +22,12 @@ SNOWMAN = np.array([[0.0, 0.0, 0.0, 0.30], [0.0, 0.0, 0.40, 0.20], [0.0, 0.0, 0.
 """Spheres (x, y, z, radius): body, chest, head, two hands."""
 
 
+def _spheres_box(spheres):
+    """(2, 3): the tight axis-aligned box around spheres given as rows (x, y, z, radius)."""
+    s = np.asarray(spheres, float)
+    return np.array([(s[:, :3] - s[:, 3:]).min(axis=0), (s[:, :3] + s[:, 3:]).max(axis=0)])
+
+
 @dataclass
 class CarvingScene(CameraRig):
     """Cameras, images and exact silhouettes of a union of spheres.
@@ -53,8 +59,7 @@ class CarvingScene(CameraRig):
     @property
     def box(self):
         """(2, 3): the tight box around the spheres."""
-        s = self.spheres
-        return np.array([(s[:, :3] - s[:, 3:]).min(axis=0), (s[:, :3] + s[:, 3:]).max(axis=0)])
+        return _spheres_box(self.spheres)
 
     def inside_object(self, X: ArrayLike) -> np.ndarray:
         """(N,) bool: which points lie inside a sphere."""

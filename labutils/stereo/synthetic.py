@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import as_count, as_positive, as_rng
+from ..carving.synthetic import _spheres_box
 from ..scene import CameraRig
 from ..synthetic import look_at
 
@@ -164,8 +165,7 @@ class SphereScene(CameraRig):
     @property
     def box(self):
         """(2, 3): the tight box around the spheres."""
-        s = self.spheres
-        return np.array([(s[:, :3] - s[:, 3:]).min(axis=0), (s[:, :3] + s[:, 3:]).max(axis=0)])
+        return _spheres_box(self.spheres)
 
     def distance_to_surface(self, X: ArrayLike) -> np.ndarray:
         """(N,) signed distance of points to the union of the spheres' surfaces (negative inside)."""
