@@ -11,7 +11,16 @@ import numpy as np
 import scipy.optimize
 from numpy.typing import ArrayLike
 
-from ._validation import as_calibration, as_count, as_matrix, as_points, as_positive, as_rng, as_rotation
+from ._validation import (
+    as_calibration,
+    as_count,
+    as_matrix,
+    as_points,
+    as_positive,
+    as_rng,
+    as_rotation,
+    as_vector3,
+)
 from .geometry import right_jacobian_so3, rotation_from_angle_axis
 from .ransac import ransac
 
@@ -339,6 +348,61 @@ def pose_jacobian(params, X, x, K, R0):
     dp_dw = -S @ (E @ right_jacobian_so3(w))              # (N, 3, 3)
     J = np.concatenate([A @ dp_dw, A], axis=2)            # (N, 2, 6)
     return J.reshape(-1, 6)
+
+
+def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigma: float = 1.0) -> np.ndarray:
+    """The covariance of a camera pose estimated from known points: ``σ² (JᵀJ)⁻¹``, the Cramér–Rao bound (H&Z Sec.
+    5.2.2, backward propagation).
+
+    With residuals ``r = u(θ) - x`` and pixels ``x = x_true + ε`` (ε Gaussian, σ per coordinate), the least-squares
+    pose is off by ``δθ = (JᵀJ)⁻¹ Jᵀ ε`` to first order, with covariance ``σ² (JᵀJ)⁻¹``; no unbiased estimator does
+    better. ``θ = (ω, δt)``: the rotation perturbed on the left, ``R̂ = exp([ω]×) R``, and ``t̂ = t + δt``; J (2N × 6)
+    is :func:`pose_jacobian` at ω = 0: with ``p = R X + t`` and ``u = K p``, ``∂u/∂ω = A (-[R X]×)`` and
+    ``∂u/∂t = A``, ``A = (K[:2] - ũ K[2]) / u₃`` (ũ the pixel).
+
+    Parameters
+    ----------
+    X : (N, 3) array_like
+        The known world points, N >= 3, in front of the camera.
+    K, R : (3, 3) array_like
+    t : (3,) array_like
+    sigma : float
+        Pixel noise per coordinate (0 gives the zero matrix).
+
+    Returns
+    -------
+    cov : (6, 6) ndarray
+        Covariance of ``(ω, δt)``: rotation (radians) first, then translation (world units).
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or values, a point behind the camera, or a pose the points do not determine (JᵀJ singular:
+        collinear points, or too few).
+
+    Examples
+    --------
+    >>> X = np.array([[0., 0, 5], [1, 0, 5], [0, 1, 6], [1, 1, 4], [-1, 0.5, 5]])
+    >>> cov = pose_covariance(X, np.diag([500., 500, 1]), np.eye(3), np.zeros(3), sigma=2.0)
+    >>> cov.shape, bool(np.allclose(cov, cov.T)), bool(np.all(np.linalg.eigvalsh(cov) > 0))
+    ((6, 6), True, True)
+    """
+    X = as_points(X, "X", dim=3, min_n=3)
+    K = as_calibration(K, "K")
+    R = as_rotation(R, "R")
+    t = as_vector3(t, "t")
+    sigma = as_positive(sigma, "sigma", allow_zero=True)
+    depth = X @ R[2] + t[2]
+    if not np.all(depth > 0):
+        raise ValueError(f"X rows {np.flatnonzero(~(depth > 0))[:5].tolist()} are not in front of the camera (R, t)")
+    J = pose_jacobian(np.concatenate([np.zeros(3), t]), X, np.zeros((len(X), 2)), K, R)
+    H = J.T @ J
+    d = 1 / np.sqrt(np.diag(H))
+    Hs = d[:, None] * H * d[None]                   # unit diagonal: radians and world units on one footing
+    if np.linalg.cond(Hs) > 1e12:
+        raise ValueError("the points do not determine the pose (JᵀJ is singular): collinear points, or too few")
+    cov = sigma ** 2 * d[:, None] * np.linalg.inv(Hs) * d[None]
+    return 0.5 * (cov + cov.T)
 
 
 def refine_pose(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, *, loss: str = "linear",

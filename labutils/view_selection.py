@@ -26,8 +26,8 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_array, as_calibration, as_count, as_points, as_positive, as_rotation, as_tracks
-from .pnp import pose_jacobian
+from ._validation import as_array, as_calibration, as_count, as_points, as_tracks
+from .pnp import pose_covariance  # noqa: F401  (re-exported: what the scores stand in for; defined beside pose_jacobian)
 from .twoview import two_view_reconstruction
 
 STRATEGIES = ("most_points", "pyramid", "sequential")
@@ -260,55 +260,6 @@ def as_scores(scores: ArrayLike, n_views: int) -> np.ndarray:
     return s
 
 
-def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigma_px: float = 1.0) -> np.ndarray:
-    """Covariance of a camera pose estimated from known points: ``σ² (JᵀJ)⁻¹`` (H&Z Sec. 5.2; the Cramér–Rao bound).
-
-    ``J`` (2N × 6) is the Jacobian of the N reprojections with respect to ``(ω, t)``, the rotation perturbed on
-    the left, ``R <- exp([ω]×) R`` (:func:`labutils.pnp.pose_jacobian` at ω = 0): with ``p = R X + t`` and
-    ``u = K p``, ``∂u/∂ω = A (-[R X]×)``, ``∂u/∂t = A``, ``A = (K[:2] - ũ K[2]) / u_3`` (ũ the pixel).
-
-    Parameters
-    ----------
-    X : (N, 3) array_like
-        The points the view sees, N >= 3, in front of it.
-    K, R : (3, 3) array_like
-    t : (3,) array_like
-    sigma_px : float
-        Pixel noise per coordinate.
-
-    Returns
-    -------
-    (6, 6) ndarray
-        Rotation (radians) first, then translation.
-
-    Raises
-    ------
-    ValueError
-        Bad input, a point behind the camera, or a pose the points do not determine (singular ``JᵀJ``).
-
-    Examples
-    --------
-    >>> X = np.array([[0., 0, 5], [1, 0, 5], [0, 1, 5], [1, 1, 6]])
-    >>> C = pose_covariance(X, np.diag([500., 500, 1]), np.eye(3), np.zeros(3))
-    >>> C.shape, bool(np.allclose(C, C.T))
-    ((6, 6), True)
-    """
-    X = as_points(X, "X", dim=3, min_n=3)
-    K = as_calibration(K)
-    R = as_rotation(R)
-    t = np.asarray(as_array(t, "t", "(3,)"), float)
-    if t.shape != (3,) or not np.all(np.isfinite(t)):
-        raise ValueError(f"t must be a finite (3,) vector; got shape {t.shape}")
-    sigma_px = as_positive(sigma_px, "sigma_px")
-    depth = X @ R[2] + t[2]
-    if not np.all(depth > 0):
-        raise ValueError(f"X rows {np.flatnonzero(~(depth > 0))[:5].tolist()} are not in front of the camera")
-    J = pose_jacobian(np.r_[0.0, 0.0, 0.0, t], X, np.zeros((len(X), 2)), K, R)
-    H = J.T @ J
-    s = np.linalg.svd(H, compute_uv=False)
-    if s[-1] <= 1e-12 * s[0]:
-        raise ValueError("the points do not determine the pose (JᵀJ is singular): collinear points, or too few")
-    return sigma_px ** 2 * np.linalg.inv(H)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -146,7 +146,7 @@ def test_pose_covariance_refuses_what_it_cannot_answer():
         pose_covariance(X, K, R, t - [0, 0, 10])
     with pytest.raises(ValueError, match=r"X has 2 points"):
         pose_covariance(X[:2], K, R, t)
-    with pytest.raises(ValueError, match="sigma_px"):
+    with pytest.raises(ValueError, match="sigma"):
         pose_covariance(X, K, R, t, -1.0)
 
 

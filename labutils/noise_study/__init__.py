@@ -11,7 +11,8 @@ Then the whole reconstruction, where the errors are measured after a similarity 
 the truth, ...) on noisy observations and collects the errors in a :class:`NoiseStudy`; the helpers build the
 pipelines' pieces (:func:`ba_from_truth`, :func:`reconstruct_without_ba`, :func:`refine_reconstruction`).
 """
-from .one_camera import nees, one_camera_trials, pose_covariance, pose_error_vectors
+from ..pnp import pose_covariance  # the prediction of section 1, defined beside pnp.pose_jacobian
+from .one_camera import nees, one_camera_trials, pose_error_vectors
 from .study import (
     NoiseStudy,
     Progress,

@@ -1,9 +1,10 @@
 """One camera with known points (notebook 06, section 1): the Cramér–Rao prediction of its pose error and the Monte
 Carlo that tests it. No gauge here: the known points fix the frame.
 
-:func:`pose_covariance` is the prediction ``σ² (JᵀJ)⁻¹`` for the pose error ``(φ, δt)``, :func:`one_camera_trials`
-the Monte Carlo of P3P-RANSAC on noisy pixels, :func:`pose_error_vectors` the measured errors, and :func:`nees` the
-normalised estimation error squared that tests the whole covariance (its mean is 6 when the prediction is right).
+:func:`labutils.pnp.pose_covariance` is the prediction ``σ² (JᵀJ)⁻¹`` for the pose error ``(φ, δt)``,
+:func:`one_camera_trials` the Monte Carlo of P3P-RANSAC on noisy pixels, :func:`pose_error_vectors` the measured
+errors, and :func:`nees` the normalised estimation error squared that tests the whole covariance (its mean is 6 when
+the prediction is right).
 """
 import numpy as np
 
@@ -19,58 +20,7 @@ from .._validation import (
     as_translations,
 )
 from ..geometry import angle_axis_from_rotation
-from ..pnp import pnp_ransac, pose_jacobian
-
-
-def pose_covariance(X, K, R, t, sigma=1.0):
-    """The Cramér–Rao bound for one camera's pose from known points: ``σ² (JᵀJ)⁻¹`` (H&Z Sec. 5.2.2).
-
-    With residuals ``r = u(θ) - x`` and pixels ``x = x_true + ε`` (ε Gaussian, σ per coordinate), the least-squares
-    pose is off by ``δθ = (JᵀJ)⁻¹ Jᵀ ε`` to first order, with covariance ``σ² (JᵀJ)⁻¹``; no unbiased estimator does
-    better. ``θ = (φ, δt)`` is the error in the frame of the truth, ``R̂ = exp([φ]×) R`` and ``t̂ = t + δt``, and
-    J = ∂(pixels)/∂(φ, δt) at the truth (:func:`labutils.pnp.pose_jacobian`).
-
-    Parameters
-    ----------
-    X : (N, 3) array_like
-        The known world points, N >= 3, in front of the camera.
-    K, R : (3, 3) array_like
-    t : (3,) array_like
-    sigma : float
-        Pixel noise per coordinate.
-
-    Returns
-    -------
-    cov : (6, 6) ndarray
-        Covariance of ``(φ, δt)``: radians and world units.
-
-    Raises
-    ------
-    ValueError
-        Bad shapes or values, or a pose that the points do not determine (JᵀJ singular).
-
-    Examples
-    --------
-    >>> X = np.array([[0., 0, 5], [1, 0, 5], [0, 1, 6], [1, 1, 4], [-1, 0.5, 5]])
-    >>> cov = pose_covariance(X, np.diag([500., 500, 1]), np.eye(3), np.zeros(3), sigma=2.0)
-    >>> cov.shape, bool(np.allclose(cov, cov.T)), bool(np.all(np.linalg.eigvalsh(cov) > 0))
-    ((6, 6), True, True)
-    """
-    X = as_points(X, "X", dim=3, min_n=3)
-    K = as_calibration(K, "K")
-    R = as_rotation(R, "R")
-    t = as_matrix(t, "t", (3,))
-    sigma = as_positive(sigma, "sigma", allow_zero=True)
-    if np.any(X @ R[2] + t[2] <= 0):
-        raise ValueError("some points of X are behind the camera (R, t): the prediction needs them in front")
-    J = pose_jacobian(np.concatenate([np.zeros(3), t]), X, np.zeros((len(X), 2)), K, R)
-    H = J.T @ J
-    d = 1 / np.sqrt(np.diag(H))
-    Hs = d[:, None] * H * d[None]
-    if np.linalg.cond(Hs) > 1e12:
-        raise ValueError("the points do not determine the pose (JᵀJ is singular): too few, or degenerate")
-    cov = sigma ** 2 * d[:, None] * np.linalg.inv(Hs) * d[None]
-    return 0.5 * (cov + cov.T)
+from ..pnp import pnp_ransac
 
 
 def pose_error_vectors(R_est, t_est, R_true, t_true):
@@ -87,7 +37,7 @@ def pose_error_vectors(R_est, t_est, R_true, t_true):
     Returns
     -------
     e : (T, 6) ndarray
-        Radians and world units, the parameters of :func:`pose_covariance`.
+        Radians and world units, the parameters of :func:`labutils.pnp.pose_covariance`.
 
     >>> from labutils.geometry import rotation_from_angle_axis
     >>> e = pose_error_vectors(rotation_from_angle_axis([[0.01, 0, 0]]), [[0, 0, 1.5]], np.eye(3), [0, 0, 1])
