@@ -272,6 +272,10 @@ def test_bad_input(small):
         NS.noisy_observations(s.x_true, 1.0, rng=np.random.default_rng(0), outlier_ratio=0.1)
     with pytest.raises(ValueError, match="positive"):
         NS.loglog_slope([0.0, 1.0], [1.0, 2.0])
+    with pytest.raises(ValueError, match="NaN error"):            # was a NaN slope, printed as a value
+        NS.loglog_slope([1.0, 2.0, 4.0], [1.0, np.nan, 4.0])
+    with pytest.raises(ValueError, match="same length"):
+        NS.loglog_slope([1.0, 2.0, 4.0], [[1.0, 2.0, 4.0]])
 
 
 def test_common_noise_scales_one_pattern(small):

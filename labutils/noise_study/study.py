@@ -232,8 +232,12 @@ def loglog_slope(sigmas, errors):
     1.0
     """
     s, e = np.asarray(sigmas, float), np.asarray(errors, float)
-    if s.shape != e.shape or s.size < 2 or np.any(s <= 0) or np.any(e <= 0):
-        raise ValueError("need at least two positive sigmas and positive errors of the same shape")
+    if s.shape != e.shape or s.ndim != 1 or s.size < 2:
+        raise ValueError(f"sigmas and errors must be two 1-D arrays of the same length >= 2; got shapes {s.shape} "
+                         f"and {e.shape}")
+    if not (np.all(np.isfinite(s)) and np.all(s > 0) and np.all(np.isfinite(e)) and np.all(e > 0)):
+        raise ValueError(f"sigmas and errors must be finite and positive (a NaN error: every trial at that σ "
+                         f"failed?); got sigmas {s.tolist()}, errors {e.tolist()}")
     return float(np.polyfit(np.log(s), np.log(e), 1)[0])
 
 
