@@ -480,7 +480,8 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     if R.shape != (V, 3, 3):
         raise ValueError(f"R must have shape ({V}, 3, 3) (NaN for views not used); got {R.shape}")
     if t.shape != (V, 3):
-        raise ValueError(f"t must have shape ({V}, 3) (NaN for views not used); got {t.shape}")
+        raise ValueError(f"t must have shape ({V}, 3) (NaN for views not used); got {t.shape}"
+                         + (" — t transposed? translations are rows" if t.shape == (3, V) else ""))
     views = np.asarray(views)
     if views.ndim != 1 or (views.size and (views.dtype.kind not in "iu" or views.min() < 0 or views.max() >= V)):
         raise ValueError(f"views must be a 1-D array of view indices in 0..{V - 1}; got {views!r}")
