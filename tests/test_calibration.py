@@ -456,6 +456,8 @@ def test_cli_help():
     ("no_folder", r"^error: missing/calib.json: the folder missing does not exist \(--out\)$"),
     ("bad_board", r"^error: argument --board: expected COLUMNSxROWS"),
     ("undistort_alone", r"^error: --undistort and --undistort-out go together"),
+    ("undistort_in_place", r"^error: .*board01.png: --undistort-out would overwrite this input photo; choose another "
+                           r"folder$"),
 ])
 def test_cli_failures_are_one_line_and_write_nothing(tmp_path, photo_dir, case, message):
     import re
@@ -467,14 +469,17 @@ def test_cli_failures_are_one_line_and_write_nothing(tmp_path, photo_dir, case, 
             "no_match": ["nothing*.png"],
             "no_folder": [imgs[0]],
             "bad_board": [imgs[0]],
-            "undistort_alone": [imgs[0], "--undistort", imgs[1]]}[case]
+            "undistort_alone": [imgs[0], "--undistort", imgs[1]],
+            "undistort_in_place": [*imgs, "--undistort", imgs[1], "--undistort-out", photo_dir]}[case]
     board = "9-6" if case == "bad_board" else "9x6"
     out = "missing/calib.json" if case == "no_folder" else "calib.json"
     before = sorted(p.name for p in tmp_path.iterdir())
+    photos_before = {p.name: p.read_bytes() for p in photo_dir.iterdir()}
     r = _cli(*args, "--board", board, "--out", out, "--k-out", "K.txt", "--quiet", cwd=tmp_path)
     assert r.returncode == 2 and r.stdout == ""
     assert len(r.stderr.strip().splitlines()) == 1 and re.search(message, r.stderr.strip()), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == before          # nothing written, no temporary file
+    assert {p.name: p.read_bytes() for p in photo_dir.iterdir()} == photos_before     # the photos untouched
 
 
 def test_cli_undistorts_photos(tmp_path, photo_dir, rendered):
@@ -502,6 +507,7 @@ def test_main_write_failure_exit_2(tmp_path, photo_dir, monkeypatch, capsys):
                                                                           str(tmp_path / "c.json"), "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and err.startswith("error: ") and "No space left" in err and len(err.splitlines()) == 1
+    assert err.startswith(f"error: {tmp_path / 'c.json'}: cannot write") and "unexpected" not in err
     assert list(tmp_path.iterdir()) == []
 
 
