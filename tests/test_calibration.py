@@ -363,6 +363,21 @@ def test_stereo_calibration_recovers_the_rig(rng):
         calibrate_stereo([v.X] * 8, v.x, x2_flipped, cal1, cal2_flipped)
 
 
+def test_stereo_refining_intrinsics_keeps_what_each_camera_fixed(rng):
+    """fix_intrinsics=False frees only what each camera's own calibration left free: k3 = 0, p = 0, fx = fy stay."""
+    v = synthetic_board_views(rng=rng, n_views=8, noise_px=0.2, distance=(0.4, 0.5), max_tilt_deg=35)
+    R_rig, t_rig = rotation_from_angle_axis([0.01, -0.04, 0.005]), np.array([-0.06, 0.001, 0.002])
+    K2 = np.array([[543.0, 0, 318], [0, 543, 244], [0, 0, 1]])
+    x2 = [project_points(v.X, K2, np.array([-0.2, 0.05, 0.001, -0.001, 0.02]), R_rig @ R, R_rig @ t + t_rig)
+          + rng.normal(0, 0.2, (len(v.X), 2)) for R, t in zip(v.R, v.t)]
+    cal1 = calibrate_camera([v.X] * 8, v.x, v.image_size, fix_k3=True, zero_tangential=True)
+    cal2 = calibrate_camera([v.X] * 8, x2, v.image_size, fix_aspect_ratio=True)
+    st = calibrate_stereo([v.X] * 8, v.x, x2, cal1, cal2, fix_intrinsics=False)
+    assert np.all(st.dist1[2:] == 0) and st.K2[0, 0] / st.K2[1, 1] == pytest.approx(cal2.K[0, 0] / cal2.K[1, 1])
+    assert not np.allclose(st.K1, cal1.K, rtol=0, atol=1e-9) and not np.allclose(st.dist2, cal2.dist, atol=1e-9)
+    assert k_error(st.K2, K2) < 0.01 and np.abs(st.t - t_rig).max() < 0.002
+
+
 # --- OpenCV side by side and the real views --------------------------------------------------------------------
 
 def _opencv(views, flags):
