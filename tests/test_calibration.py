@@ -97,6 +97,23 @@ def test_project_points_rejects_points_behind_and_skew():
         project_points([[0, 0, -1.0]], K, np.zeros(5), np.eye(3), np.zeros(3))
     with pytest.raises(ValueError, match="zero skew"):
         project_points([[0, 0, 1.0]], K + [[0, 1, 0], [0, 0, 0], [0, 0, 0]], np.zeros(5), np.eye(3), np.zeros(3))
+    with pytest.raises(ValueError, match="R is not a rotation matrix"):          # it returned pixels
+        project_points([[0, 0, 1.0]], K, np.zeros(5), 2 * np.eye(3), np.zeros(3))
+
+
+def test_chessboard_functions_reject_bad_input():
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    x = board_points((4, 3), 10.0)[:, :2] + 5
+    x[5, 0] = np.nan
+    with pytest.raises(ValueError, match=r"x has non-finite coordinates \(NaN or inf\) in rows \[5\]"):
+        grid_line_residuals(x, (4, 3))                                           # was numpy's LinAlgError
+    with pytest.raises(ValueError, match="R is not a rotation matrix"):          # it drew an image
+        render_board(K, np.zeros(5), 2 * np.eye(3), [0, 0, 0.5], image_size=(64, 48))
+    for bad in [(640,), (640.5, 480), (640, 0)]:
+        with pytest.raises(ValueError, match="image_size"):
+            render_board(K, np.zeros(5), np.eye(3), [0, 0, 0.5], image_size=bad)
+        with pytest.raises(ValueError, match="image_size"):
+            synthetic_board_views(n_views=1, rng=np.random.default_rng(0), image_size=bad)
 
 
 def test_board_homography_and_zhang_reject_bad_input():
