@@ -19,8 +19,9 @@ the images where it is not found or that cannot be read, calibrates with Zhang's
 All files are written at the end, each through a temporary file and ``os.replace``; on any failure none is.
 
 Exit status 0 on success; 2 with one line ``error: <file>: what is wrong`` on stderr for any failure (no image
-matches, fewer than 3 usable views, images of different sizes, an output folder that does not exist, an
-unreadable photo to undistort, a write that fails), and then nothing is written. Progress goes to stderr, the
+matches, fewer than 3 usable views, images of different sizes, an output folder that does not exist, an output
+that would replace one of the input photos (e.g. ``--undistort-out`` the photos' own folder), an unreadable photo
+to undistort, a write that fails), and then nothing is written. Progress goes to stderr, the
 summary to stdout.
 
 This module is only the command line; the estimators live in :mod:`labutils.calibration`.
@@ -99,8 +100,7 @@ def detect_all(files, board, quiet=False):
             size, size_from = (w, h), f
         elif (w, h) != size:
             raise _cli.CommandError(f"{f}: image size {w}x{h} differs from {size[0]}x{size[1]} ({size_from}); "
-                                    "calibrate "
-                               "one camera at one resolution at a time (do not resize or mix cameras)")
+                                    "calibrate one camera at one resolution at a time (do not resize or mix cameras)")
         x = detect_corners(img, board)
         if x is None:
             rejected.append({"image": f, "reason": f"board not found ({board[0]}x{board[1]} inner corners)"})
@@ -133,6 +133,25 @@ def max_distortion_px(K, dist, image_size):
         return None
 
 
+_ENCODABLE = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp")
+
+
+def undistorted_path(photo, out_dir):
+    """Where the undistorted copy of ``photo`` goes: the same file name in ``out_dir`` (``.png`` for other types)."""
+    p = Path(photo)
+    return str(Path(out_dir) / (p.name if p.suffix.lower() in _ENCODABLE else p.stem + ".png"))
+
+
+def check_no_input_overwritten(outputs, inputs):
+    """Raise CommandError when an output path (``{path: what}``) is one of the input images: it would replace it."""
+    resolved = {Path(f).resolve(): f for f in inputs}
+    for path, what in outputs.items():
+        hit = resolved.get(Path(path).resolve())
+        if hit is not None:
+            raise _cli.CommandError(f"{hit}: {what} would overwrite this input photo; choose another "
+                                    f"{'folder' if what == '--undistort-out' else 'file'}")
+
+
 def undistorted_images(files, K, dist, size, out_dir, quiet=False):
     """``{out_dir/name: encoded bytes}`` of each photo undistorted into the ideal camera K (same K, same size).
 
@@ -143,9 +162,8 @@ def undistorted_images(files, K, dist, size, out_dir, quiet=False):
     for f in files:
         name = Path(f).name
         if name in names:
-            raise _cli.CommandError(f"{f}: same file name as {names[name]}; the undistorted copies would overwrite "
-                                    "each "
-                               "other")
+            raise _cli.CommandError(f"{f}: same file name as {names[name]}; "
+                                    "the undistorted copies would overwrite each other")
         names[name] = f
     maps = remap_grid(K, dist, size)
     progress = _cli.Progress(len(files), "images", quiet=quiet)
@@ -155,17 +173,16 @@ def undistorted_images(files, K, dist, size, out_dir, quiet=False):
         if img is None:
             raise _cli.CommandError(f"{f}: cannot read this image (--undistort)")
         if (img.shape[1], img.shape[0]) != tuple(size):
-            raise _cli.CommandError(f"{f}: image size {img.shape[1]}x{img.shape[0]} differs from the calibration "
-                                    "images' "
-                               f"{size[0]}x{size[1]}; K holds for that size only (--undistort)")
+            raise _cli.CommandError(f"{f}: image size {img.shape[1]}x{img.shape[0]} differs from "
+                                    f"the calibration images' {size[0]}x{size[1]}; K holds for that size only "
+                                    "(--undistort)")
         und = cv2.remap(img, *maps, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        ext = Path(f).suffix.lower() or ".png"
-        ok, buf = cv2.imencode(ext if ext in (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp") else ".png", und,
+        ext = Path(f).suffix.lower()
+        ok, buf = cv2.imencode(ext if ext in _ENCODABLE else ".png", und,
                                [cv2.IMWRITE_JPEG_QUALITY, 95] if ext in (".jpg", ".jpeg") else [])
         if not ok:
             raise _cli.CommandError(f"{f}: cannot encode the undistorted image")
-        out[str(Path(out_dir) / (Path(f).name if ext in (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp")
-                                 else Path(f).stem + ".png"))] = buf.tobytes()
+        out[undistorted_path(f, out_dir)] = buf.tobytes()
         progress.step(note=f"{f}: " + "undistorted")
     return out
 
@@ -204,15 +221,17 @@ def main(argv=None):
             raise _cli.CommandError(f"{args.undistort_out}: the folder does not exist (--undistort-out)")
         files = _expand(args.images)
         photos = _expand(args.undistort) if args.undistort else []
+        planned = {args.out: "--out", **({args.k_out: "--k-out"} if args.k_out else {}),
+                   **{undistorted_path(f, args.undistort_out): "--undistort-out" for f in photos}}
+        check_no_input_overwritten(planned, files + photos)
         names, corners, size, rejected = detect_all(files, args.board, args.quiet)
         pattern = " ".join(args.images)
         if len(names) < 3:
             why = "; ".join(f"{r['image']}: {r['reason']}" for r in rejected[:3])
             why += " ..." if len(rejected) > 3 else ""
-            raise _cli.CommandError(f"{pattern}: {len(names)} usable view{'s' if len(names) != 1 else ''} of "
-                                    f"{len(files)} "
-                               f"image{'s' if len(files) != 1 else ''}; at least 3 are needed"
-                               + (f" (rejected: {why})" if rejected else ""))
+            raise _cli.CommandError(f"{pattern}: {len(names)} usable view{'s' if len(names) != 1 else ''} "
+                                    f"of {len(files)} image{'s' if len(files) != 1 else ''}; at least 3 are needed"
+                                    + (f" (rejected: {why})" if rejected else ""))
         X = board_points(args.board, args.square)
         try:
             cal = calibrate_camera([X] * len(names), corners, size, fix_aspect_ratio=args.fix_aspect_ratio,
@@ -233,7 +252,7 @@ def main(argv=None):
         if photos:
             outputs.update(undistorted_images(photos, cal.K, cal.dist, size, args.undistort_out, args.quiet))
         _cli.write_all_atomically(outputs)
-    except _cli.CommandError as exc:
+    except (_cli.CommandError, OSError) as exc:       # an OSError from writing names the file already
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:                  # a bug or an unforeseen input: still one line, no traceback

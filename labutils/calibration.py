@@ -535,6 +535,9 @@ def calibrate_stereo(object_points, image_points1, image_points2, cal1, cal2, *,
     cal1, cal2 : CalibrationResult
         Each camera calibrated on its own (with the same views, in the same order).
     fix_intrinsics : bool
+        Keep both cameras' K and distortion as calibrated (default). False refines them too, each camera over the
+        parameters its own calibration left free: what it fixed (``fix_aspect_ratio``, ``zero_tangential``,
+        ``fix_k3``, ...) stays fixed.
 
     Returns
     -------
@@ -566,9 +569,9 @@ def calibrate_stereo(object_points, image_points1, image_points2, cal1, cal2, *,
     if fix_intrinsics:
         A = [np.zeros((9, 0)), np.zeros((9, 0))]
         names = [[], []]
-    else:
-        A = [np.eye(9), np.eye(9)]
-        names = [list(INTRINSIC_NAMES)] * 2
+    else:                 # each camera keeps the free set of its own calibration (fx = fy, k3 = 0, ... stay so)
+        A = [cal1.problem.A[0], cal2.problem.A[0]]
+        names = [list(cal1.free), list(cal2.free)]
     prob = CalibrationProblem(np.vstack([X1, X2]), np.vstack([xa, xb]), np.r_[c1, c2], np.r_[v1, v2], theta0, A,
                               names)
     p0 = prob.pack(rig_R=[R0], rig_t=[t0], board_R=cal1.R, board_t=cal1.t)

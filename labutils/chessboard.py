@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ._validation import as_matrix
+from ._validation import as_image_size, as_matrix, as_points, as_rotation
 from .datapath import DataNotFoundError, find_data
 from .geometry import rotation_from_angle_axis
 from .lens import as_distortion, as_intrinsics, project_points, undistort_normalised
@@ -176,7 +176,7 @@ def _random_board_pose(rng, K, dist, image_size, board, square, min_dist, max_di
     Xb = board_points(board, square)
     centre = np.array([(nx - 1) * square / 2, (ny - 1) * square / 2, 0.0])
     outline = np.array([[-1, -1, 0], [nx, -1, 0], [nx, ny, 0], [-1, ny, 0]], float) * square
-    w, h = image_size
+    w, h = as_image_size(image_size)
     for _ in range(1000):
         axis = rng.normal(size=2)
         tilt = np.radians(rng.uniform(10, max_tilt_deg))
@@ -237,7 +237,7 @@ def synthetic_board_views(n_views=12, noise_px=0.1, *, rng, K=None, dist=None, b
     K = as_intrinsics(DEFAULT_K if K is None else K)
     dist = as_distortion(DEFAULT_DIST if dist is None else dist)
     board = _board(board)
-    w, h = image_size
+    w, h = as_image_size(image_size)
     X = board_points(board, square)
     Rs, ts, x_true, x = [], [], [], []
     for _ in range(int(n_views)):
@@ -257,7 +257,7 @@ def _corner_rays(K, dist, image_size):
 
     Pixel centres are at integer coordinates, so pixel (i, j) spans ``[i - 0.5, i + 0.5] × [j - 0.5, j + 0.5]``.
     """
-    w, h = image_size
+    w, h = as_image_size(image_size)
     u, v = np.meshgrid(np.arange(w + 1) - 0.5, np.arange(h + 1) - 0.5)
     xd = np.column_stack([((u - K[0, 2]) / K[0, 0]).ravel(), ((v - K[1, 2]) / K[1, 1]).ravel()])
     return undistort_normalised(xd, dist).reshape(h + 1, w + 1, 2)
@@ -275,7 +275,7 @@ def render_board(K, dist, R, t, *, board=(9, 6), square=0.025, image_size=(640, 
     """Draw the image a camera ``(K, dist)`` takes of a chessboard at pose ``(R, t)``: anti-aliased, uint8, grey.
 
     Each pixel is the mean of the board's brightness over the pixel's area. The ray through each pixel corner is
-    found by undoing the distortion (:func:`labutils.calibration.undistort_normalised`, Newton's method) and is cut
+    found by undoing the distortion (:func:`labutils.lens.undistort_normalised`, Newton's method) and is cut
     with the board's plane (the inverse of the homography ``[r1 r2 t]``). A pixel whose four corners see the same
     colour is that colour; a pixel an edge crosses is the mean of ``supersample²`` samples, whose board
     coordinates are interpolated bilinearly between its corners' (within a pixel the map from image to board is
@@ -296,10 +296,10 @@ def render_board(K, dist, R, t, *, board=(9, 6), square=0.025, image_size=(640, 
     """
     K = as_intrinsics(K)
     dist = as_distortion(dist)
-    R = as_matrix(R, "R", (3, 3))
+    R = as_rotation(R, "R")
     t = as_matrix(np.asarray(t, float).reshape(-1), "t", (3,))
     nx, ny = _board(board)
-    w, h = image_size
+    w, h = as_image_size(image_size)
     s = int(supersample)
     if s < 1:
         raise ValueError(f"supersample must be a positive integer; got {supersample!r}")
@@ -402,7 +402,7 @@ def _same_order(x, x_true):
     return x[::-1].copy() if np.abs(x[::-1] - x_true).max() < np.abs(x - x_true).max() else x
 
 
-def synthetic_stereo_views(n_views=13, *, rng, noise=2.0, verbose=False):
+def synthetic_stereo_views(n_views=13, *, rng, noise=2.0):
     """Rendered views of the 9×6 board by a stereo rig with known truth, detected like real photos.
 
     Camera 1 is :data:`DEFAULT_K`, :data:`DEFAULT_DIST`; camera 2 is ``RIG_K2, RIG_DIST2`` at ``x_cam2 = RIG_R @
@@ -486,7 +486,7 @@ def grid_line_residuals(x, board=(9, 6)):
     0.0
     """
     nx, ny = _board(board)
-    x = np.asarray(x, dtype=float)
+    x = as_points(x, "x")
     if x.shape != (nx * ny, 2):
         raise ValueError(f"x must have shape ({nx * ny}, 2) for a {nx}x{ny} board; got {x.shape}")
     g = x.reshape(ny, nx, 2)

@@ -2,7 +2,7 @@
 
 - :func:`remap_grid` / :func:`undistort_image`: the ideal pinhole image of a camera with lens distortion. For each
   pixel of the *output* image we compute where it came from in the *input* image (inverse mapping: output pixel →
-  ideal normalised point → :func:`labutils.calibration.distort` → input pixel) and let ``cv2.remap`` interpolate.
+  ideal normalised point → :func:`labutils.lens.distort` → input pixel) and let ``cv2.remap`` interpolate.
   No inversion of the distortion is needed this way round.
 - :func:`rectify_fusiello`: rectifying homographies for a calibrated pair. Both cameras are turned (about their
   centres) to one common orientation whose x axis is the baseline, and given one common K. Then corresponding

@@ -115,6 +115,18 @@ def test_distort_swapped_tangential():
     assert "swapped" in hints(check_distort_points(wrong, verbose=False))
 
 
+def test_distort_rounding_passes_and_float32_gets_its_hint():
+    assert_passes(check_distort_points, lambda xn, d: distort_reference(xn, d) + 1e-11)   # another order of operations
+
+    def in_float32(xn, d):
+        return distort_reference(xn.astype(np.float32), np.asarray(d, np.float32))
+    assert "compute in float64" in hints(check_distort_points(in_float32, verbose=False))
+
+    def swapped_in_float32(xn, d):
+        return distort_reference(xn.astype(np.float32), np.asarray([d[0], d[1], d[3], d[2], d[4]], np.float32))
+    assert "swapped" in hints(check_distort_points(swapped_in_float32, verbose=False))
+
+
 def test_distort_r_instead_of_r2():
     def wrong(xn, d):
         k1, k2, p1, p2, k3 = d
