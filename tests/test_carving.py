@@ -95,6 +95,10 @@ def test_bad_input_raises_naming_the_argument(scene):
         mask_iou(masks[0], masks[0][:-1])
     with pytest.raises(ValueError, match="both masks are empty"):
         mask_iou(np.zeros((3, 3), bool), np.zeros((3, 3), bool))
+    with pytest.raises(ValueError, match=r"mask must be a \(H, W\) boolean mask with H, W > 0"):
+        clean_mask(np.zeros((0, 3), bool))         # cv2.connectedComponentsWithStats crashed python on it
+    with pytest.raises(ValueError, match=r"masks\[0\] must be a \(H, W\) boolean mask with H, W > 0"):
+        carve([np.zeros((0, 5), np.uint8)] + list(masks[1:]), P, grid)
     with pytest.raises(ValueError, match="X must have shape"):
         inside_silhouette(np.zeros((4, 2)), P[0], masks[0])
     with pytest.raises(ValueError, match="faces hold vertex indices"):
