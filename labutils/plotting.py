@@ -2,7 +2,7 @@
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from ._validation import as_array
+from ._validation import as_array, as_mesh
 from .geometry import camera_center
 from .metrics import align_cameras
 
@@ -445,9 +445,7 @@ def _rgb_strings(cols):
 def _mesh_trace(vertices, faces, vertex_colors=None):
     import plotly.graph_objects as go
 
-    V, F = np.asarray(vertices, float), np.asarray(faces, int)
-    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
-        raise ValueError(f"a mesh is vertices (N, 3) and faces (M, 3); got {V.shape} and {F.shape}")
+    V, F = as_mesh(vertices, faces)
     kw = dict(color="lightgrey", flatshading=False)
     if vertex_colors is not None:
         c = _colors_rgb(vertex_colors, len(V))
@@ -484,7 +482,7 @@ def _static_view(X, cols, segments, mesh, title):
     if segments is not None and len(segments):
         ax.add_collection3d(Line3DCollection(segments, colors="royalblue", linewidths=0.8))
     if mesh is not None:
-        V, F = np.asarray(mesh[0], float), np.asarray(mesh[1], int)
+        V, F = as_mesh(mesh[0], mesh[1])
         c = mesh[2] if len(mesh) > 2 and mesh[2] is not None else None
         face_col = "lightgrey" if c is None else _colors_rgb(c, len(V))[F].mean(1)
         ax.add_collection3d(Poly3DCollection(V[F], facecolors=face_col, edgecolors="none", alpha=1.0))

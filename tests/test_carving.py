@@ -105,6 +105,9 @@ def test_bad_input_raises_naming_the_argument(scene):
         render_silhouette(np.zeros((3, 3)) + [0, 0, 0.3], [[0, 1, 3]], P[0], (20, 10))
     with pytest.raises(ValueError, match="image_size must be"):
         render_silhouette(np.eye(3) + [0, 0, 3], [[0, 1, 2]], P[0], (20, -1))
+    with pytest.raises(ValueError, match=r"faces hold vertex indices 0..2; got -1..1"):
+        render_silhouette(np.eye(3) + [0, 0, 3], [[0, 1, -1]], P[0], (20, 10))
+    assert not render_silhouette(np.eye(3) + [0, 0, 3], np.zeros((0, 3), int), P[0], (20, 10)).any()   # no faces
     model = background_model(scene.images[:2])
     for call, message in [
         (lambda: silhouette(scene.images[0], model, threshold=np.nan), "threshold must be a finite number"),

@@ -12,6 +12,7 @@ from labutils.plotting import (  # noqa: E402
     plot_cameras,
     plot_cameras_and_points,
     plot_points,
+    show_mesh,
     show_reconstruction,
 )
 
@@ -54,3 +55,20 @@ def test_transposed_or_mismatched_arrays_are_refused():
         with pytest.raises(ValueError, match=message):
             call()
     plt.close(fig)
+
+
+@pytest.mark.parametrize("static", [False, True])
+def test_show_mesh_checks_the_mesh(static):
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    F = np.array([[0, 1, 2], [0, 1, 3]])
+    for vertices, faces, message in [
+        (V, [[0, 1, 4]], "faces hold vertex indices 0..3; got 0..4"),          # past the last vertex
+        (V, F.astype(float), r"faces must be an \(F, 3\) integer array"),
+        (V * [1, 1, np.nan], F, "vertices has non-finite coordinates"),
+        (V.T, F, "transposed"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            show_mesh(vertices, faces, static=static)
+    with pytest.raises(ValueError, match="faces hold vertex indices"):
+        show_reconstruction(V, mesh=(V, [[0, 1, 4]]), static=static)
+    plt.close("all")
