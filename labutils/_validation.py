@@ -362,3 +362,33 @@ def as_tracks(tracks, name="tracks", min_views=1, min_tracks=0):
         raise ValueError(f"{name}[{v}, {k}] is (-1, -1): mark an unseen observation with NaN, not -1 "
                          "(labutils.scene.nan_tracks converts a -1-marked array)")
     return x
+
+
+def as_mesh(vertices, faces, allow_empty=False):
+    """A triangle mesh: finite ``(N, 3)`` float vertices and ``(F, 3)`` int64 faces indexing them, or ``ValueError``.
+
+    Faces must be integers (a float array is refused, even with integral values) in ``0..N-1``: ``-1`` would
+    silently wrap to the last vertex. ``allow_empty``: zero faces are accepted (a mesh with nothing to draw), and
+    then a single vertex is enough; otherwise a mesh needs a triangle and three vertices.
+
+    >>> as_mesh(np.eye(3), [[0, 1, 2]])[1].dtype
+    dtype('int64')
+    >>> as_mesh(np.eye(3), [[0, 1, -1]])
+    Traceback (most recent call last):
+    ...
+    ValueError: faces hold vertex indices 0..2; got -1..1
+    """
+    V = as_points(vertices, "vertices", dim=3, min_n=1 if allow_empty else 3)
+    try:
+        F = np.asarray(faces)
+    except ValueError as exc:
+        raise ValueError(f"faces must be an (F, 3) integer array of triangles: {exc}") from None
+    if F.ndim != 2 or F.shape[1] != 3 or (F.size and F.dtype.kind not in "iu"):
+        raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
+    if len(F) == 0:
+        if not allow_empty:
+            raise ValueError("faces is empty: a mesh needs at least one triangle")
+        return V, np.zeros((0, 3), np.int64)
+    if F.min() < 0 or F.max() >= len(V):
+        raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
+    return V, F.astype(np.int64)

@@ -4,7 +4,8 @@ Reads a Middlebury camera file (the images beside it), learns the background's c
 makes one silhouette per image, finds the object's box, carves the visual hull on a voxel grid, and writes its
 surface (marching cubes) as a binary PLY mesh; with ``--masks DIR`` also the silhouettes as PNGs
 (``<image>_mask.png``). Progress goes to stderr. Every failure is one line on stderr,
-``error: <file>[, line N]: what is wrong``, with exit status 2, and nothing is written.
+``error: <file>[, line N]: what is wrong``, with exit status 2, and nothing is written. A model whose silhouettes
+match the masks poorly (median IoU < 0.5) is still written (exit 0), with one ``carve: warning: ...`` line on stderr.
 
 The estimators live in :mod:`labutils.carving`; this module is the thin command line around them.
 """
@@ -34,6 +35,7 @@ from .middlebury import read_par
 from .ply import write_mesh
 
 DEFAULT_GRID = 128
+MIN_MEDIAN_IOU = 0.5          # below it the written model is reported with a warning on stderr
 
 
 def _log(quiet, *parts):
@@ -68,6 +70,8 @@ def run(args):
     t_start = time.perf_counter()
     par = Path(args.par)
     out = Path(args.out)
+    if par.is_dir():
+        raise _cli.CommandError(f"{par}: is a folder; give the camera file (e.g. {par / (par.name + '_par.txt')})")
     if not par.is_file():
         raise _cli.CommandError(f"{par}: no such file")
     _cli.check_output_path(out, "--out")
@@ -105,6 +109,11 @@ def run(args):
     print(f"wrote {out} ({len(vertices)} vertices, {len(faces)} triangles; silhouette IoU min {ious.min():.3f}, "
           f"median {np.median(ious):.3f})" + (f" and {len(masks)} masks in {masks_dir}" if masks_dir else "")
           + f" in {seconds:.1f} s")
+    median = float(np.median(ious))
+    if median < MIN_MEDIAN_IOU:             # written, but the model does not explain the masks: say so
+        print(f"carve: warning: the model's silhouettes hardly match the masks (median IoU {median:.3f} < "
+              f"{MIN_MEDIAN_IOU}): object and background colours too close, or wrong cameras; look at --masks",
+              file=sys.stderr, flush=True)
     return 0
 
 

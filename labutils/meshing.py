@@ -22,27 +22,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from ._validation import as_points, as_positive
+from ._validation import as_mesh, as_points, as_positive
 
 __all__ = ["DelaunayMesh", "delaunay_mesh", "boundary_faces", "face_normals", "vertex_normals"]
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Checks
-# --------------------------------------------------------------------------------------------------------------
-def _as_mesh(vertices, faces):
-    V = as_points(vertices, "vertices", dim=3, min_n=3)
-    try:
-        F = np.asarray(faces)
-    except ValueError as exc:
-        raise ValueError(f"faces must be an (F, 3) integer array of triangles: {exc}") from None
-    if F.ndim != 2 or F.shape[1] != 3 or (F.size and F.dtype.kind not in "iu"):
-        raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
-    if len(F) == 0:
-        raise ValueError("faces is empty: a mesh needs at least one triangle")
-    if F.min() < 0 or F.max() >= len(V):
-        raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
-    return V, F.astype(np.int64)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -56,7 +38,7 @@ def face_normals(vertices: ArrayLike, faces: ArrayLike) -> np.ndarray:
     >>> face_normals(np.eye(3), [[0, 1, 2]]).round(3)
     array([[0.577, 0.577, 0.577]])
     """
-    V, F = _as_mesh(vertices, faces)
+    V, F = as_mesh(vertices, faces)
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     length = np.linalg.norm(n, axis=1)
     if np.any(length == 0):
@@ -76,7 +58,7 @@ def vertex_normals(vertices: ArrayLike, faces: ArrayLike) -> np.ndarray:
            [0., 0., 1.],
            [0., 0., 1.]])
     """
-    V, F = _as_mesh(vertices, faces)
+    V, F = as_mesh(vertices, faces)
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])     # length = 2 × area
     acc = np.zeros_like(V)
     for k in range(3):

@@ -2,8 +2,37 @@
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
+from ._validation import as_array, as_mesh
 from .geometry import camera_center
 from .metrics import align_cameras
+
+
+def _points3(X, name="X"):
+    """``X`` as a float ``(N, 3)`` array (NaN rows allowed: they are skipped), else ``ValueError`` — never reshaped,
+    so a transposed ``(3, N)`` array is not drawn as garbage points."""
+    a = as_array(X, name, "(N, 3)")
+    if a.ndim != 2 or a.shape[1] != 3:
+        hint = " — transposed? points are rows" if a.ndim == 2 and a.shape[0] == 3 else ""
+        raise ValueError(f"{name} must have shape (N, 3) (points as rows); got shape {a.shape}{hint}")
+    return a
+
+
+def _poses(R, t):
+    """Poses as ``(V, 3, 3)`` and ``(V, 3)`` arrays (NaN rows allowed: unregistered views); one camera may be given
+    as ``(3, 3)`` and ``(3,)``. Anything else is a ``ValueError``, not a silent reshape."""
+    R, t = as_array(R, "R", "(V, 3, 3)"), as_array(t, "t", "(V, 3)")
+    if R.shape == (3, 3):
+        R = R[None]
+    if t.shape == (3,):
+        t = t[None]
+    if R.ndim != 3 or R.shape[1:] != (3, 3):
+        raise ValueError(f"R must have shape (V, 3, 3) or (3, 3); got shape {R.shape}")
+    if t.ndim != 2 or t.shape[1] != 3:
+        hint = " — transposed? translations are rows" if t.ndim == 2 and t.shape[0] == 3 else ""
+        raise ValueError(f"t must have shape (V, 3) or (3,) (one translation per row); got shape {t.shape}{hint}")
+    if len(R) != len(t):
+        raise ValueError(f"R has {len(R)} rotations but t has {len(t)} translations: one of each per camera")
+    return R, t
 
 
 def set_axes_equal(ax):
@@ -50,7 +79,7 @@ def plot_view_errors(ax, errors, ylabel="rotation error (°)", width=0.8):
 
 def plot_cameras(ax, R, t, scale=0.1, color="C0", label=None, numbers=False):
     """Draw cameras as small pyramids on a 3D axis (``x_cam = R @ X + t``; the apex is the centre)."""
-    R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+    R, t = _poses(R, t)
     corners = scale * np.array([[-1, -0.75, 1.5], [1, -0.75, 1.5], [1, 0.75, 1.5], [-1, 0.75, 1.5]])
     for i, (Ri, ti) in enumerate(zip(R, t)):
         C = -Ri.T @ ti
@@ -65,7 +94,7 @@ def plot_cameras(ax, R, t, scale=0.1, color="C0", label=None, numbers=False):
 
 def plot_points(ax, X, color="k", size=1, label=None, **kwargs):
     """Scatter world points ``(N, 3)`` on a 3D axis."""
-    X = np.asarray(X, float)
+    X = _points3(X)
     ax.scatter(X[:, 0], X[:, 1], X[:, 2], s=size, c=color, label=label, depthshade=False, **kwargs)
     return ax
 
@@ -272,7 +301,7 @@ def camera_frusta(R, t, K, image_size, scale):
     >>> camera_frusta(np.eye(3)[None], np.zeros((1, 3)), np.diag([100.0, 100.0, 1.0]), (200, 100), 1.0).shape
     (8, 2, 3)
     """
-    R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+    R, t = _poses(R, t)
     Ks = np.broadcast_to(np.asarray(K, float), (len(R), 3, 3))
     w, h = image_size
     corners = np.array([[0, 0, 1], [w, 0, 1], [w, h, 1], [0, h, 1]], float)
@@ -347,7 +376,7 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
     >>> [trace.type for trace in fig.data]
     ['scatter3d', 'scatter3d']
     """
-    X = None if X is None else np.asarray(X, float).reshape(-1, 3)
+    X = None if X is None else _points3(X)
     keep = None if X is None else np.all(np.isfinite(X), axis=1)
     cols = None if X is None else _colors_rgb(colors, len(X))
     hedgehog = None
@@ -368,7 +397,7 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
             X, cols = X[pick], (None if cols is None else cols[pick])
     C = None
     if R is not None:
-        R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+        R, t = _poses(R, t)
         C = camera_center(R, t)
     scale = frustum_scale or 0.05 * _scene_size(X, C)
     segments = None
@@ -416,9 +445,7 @@ def _rgb_strings(cols):
 def _mesh_trace(vertices, faces, vertex_colors=None):
     import plotly.graph_objects as go
 
-    V, F = np.asarray(vertices, float), np.asarray(faces, int)
-    if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3:
-        raise ValueError(f"a mesh is vertices (N, 3) and faces (M, 3); got {V.shape} and {F.shape}")
+    V, F = as_mesh(vertices, faces)
     kw = dict(color="lightgrey", flatshading=False)
     if vertex_colors is not None:
         c = _colors_rgb(vertex_colors, len(V))
@@ -455,7 +482,7 @@ def _static_view(X, cols, segments, mesh, title):
     if segments is not None and len(segments):
         ax.add_collection3d(Line3DCollection(segments, colors="royalblue", linewidths=0.8))
     if mesh is not None:
-        V, F = np.asarray(mesh[0], float), np.asarray(mesh[1], int)
+        V, F = as_mesh(mesh[0], mesh[1])
         c = mesh[2] if len(mesh) > 2 and mesh[2] is not None else None
         face_col = "lightgrey" if c is None else _colors_rgb(c, len(V))[F].mean(1)
         ax.add_collection3d(Poly3DCollection(V[F], facecolors=face_col, edgecolors="none", alpha=1.0))
@@ -487,7 +514,7 @@ def plot_cameras_and_points(ax, R=None, t=None, X=None, number_every=6, scale=0.
     point along +z on average, so the picture is upright as the cameras see the scene.
     """
     if R is not None:
-        R, t = np.asarray(R, float).reshape(-1, 3, 3), np.asarray(t, float).reshape(-1, 3)
+        R, t = _poses(R, t)
         plot_cameras(ax, R, t, scale=scale, color=color)
         C = camera_center(R, t)
         centre = C.mean(0)

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_array, as_image_size, as_points, as_positive
+from ._validation import as_array, as_image_size, as_mesh, as_points, as_positive
 from .geometry import camera_center
-from .meshing import _as_mesh, vertex_normals
+from .meshing import vertex_normals
 from .pointcloud import _as_cameras, _as_image, _as_visible, _project, sample_image
 
 __all__ = ["render_depth", "VertexViews", "vertex_views", "most_frontal_view", "VertexTexture", "texture_vertices",
@@ -72,7 +72,7 @@ def render_depth(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     >>> depth[2, 2], face[2, 2], face[0, 0]         # 1/z averaged: 3 = 1 / ((1/4 + 1/4 + 1/2) / 3), not 10/3
     (np.float64(3.0), np.int64(0), np.int64(-1))
     """
-    V, F = _as_mesh(vertices, faces)
+    V, F = as_mesh(vertices, faces)
     R, t = as_array(R, "R", "(3, 3)"), as_array(t, "t", "(3,)")
     if R.shape != (3, 3) or t.shape != (3,):
         raise ValueError(f"R must have shape (3, 3) and t shape (3,) (one view); got {R.shape} and {t.shape}")
@@ -206,7 +206,7 @@ def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     >>> vv.visible.all(), vv.colors[0, 0].tolist()
     (np.True_, [50.0, 50.0, 50.0])
     """
-    V, F = _as_mesh(vertices, faces)
+    V, F = as_mesh(vertices, faces)
     Ks, R, t, registered = _as_cameras(K, R, t)
     images = list(images)
     if len(images) != len(R):
@@ -401,12 +401,13 @@ def edge_contrast(colors: ArrayLike, faces: ArrayLike) -> float:
     >>> edge_contrast([[0, 0, 0], [255, 255, 255], [0, 0, 0]], [[0, 1, 2]])   # edges 0-1, 1-2 differ, 2-0 not
     170.0
     """
-    c = np.asarray(colors, float)
-    F = np.asarray(faces)
+    c = as_array(colors, "colors", "(N, 3)")
     if c.ndim != 2 or c.shape[1] != 3:
-        raise ValueError(f"colors must have shape (N, 3); got shape {c.shape}")
-    if F.ndim != 2 or F.shape[1] != 3 or F.size == 0 or F.min() < 0 or F.max() >= len(c):
-        raise ValueError(f"faces must be an (F, 3) array of indices into colors' {len(c)} rows; got shape {F.shape}")
+        raise ValueError(f"colors must have shape (N, 3) (one RGB row per vertex); got shape {c.shape}")
+    if not np.all(np.isfinite(c)):
+        raise ValueError(f"colors has non-finite values (NaN or inf) in rows "
+                         f"{np.flatnonzero(~np.all(np.isfinite(c), axis=1))[:5].tolist()}")
+    _, F = as_mesh(c, faces)                                 # one colour per vertex: faces index the rows of colors
     y = c @ np.array([0.299, 0.587, 0.114])
     e = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1), axis=0)
     return float(np.abs(y[e[:, 0]] - y[e[:, 1]]).mean())

@@ -95,12 +95,19 @@ def test_bad_input_raises_naming_the_argument(scene):
         mask_iou(masks[0], masks[0][:-1])
     with pytest.raises(ValueError, match="both masks are empty"):
         mask_iou(np.zeros((3, 3), bool), np.zeros((3, 3), bool))
+    with pytest.raises(ValueError, match=r"mask must be a \(H, W\) boolean mask with H, W > 0"):
+        clean_mask(np.zeros((0, 3), bool))         # cv2.connectedComponentsWithStats crashed python on it
+    with pytest.raises(ValueError, match=r"masks\[0\] must be a \(H, W\) boolean mask with H, W > 0"):
+        carve([np.zeros((0, 5), np.uint8)] + list(masks[1:]), P, grid)
     with pytest.raises(ValueError, match="X must have shape"):
         inside_silhouette(np.zeros((4, 2)), P[0], masks[0])
     with pytest.raises(ValueError, match="faces hold vertex indices"):
         render_silhouette(np.zeros((3, 3)) + [0, 0, 0.3], [[0, 1, 3]], P[0], (20, 10))
     with pytest.raises(ValueError, match="image_size must be"):
         render_silhouette(np.eye(3) + [0, 0, 3], [[0, 1, 2]], P[0], (20, -1))
+    with pytest.raises(ValueError, match=r"faces hold vertex indices 0..2; got -1..1"):
+        render_silhouette(np.eye(3) + [0, 0, 3], [[0, 1, -1]], P[0], (20, 10))
+    assert not render_silhouette(np.eye(3) + [0, 0, 3], np.zeros((0, 3), int), P[0], (20, 10)).any()   # no faces
     model = background_model(scene.images[:2])
     for call, message in [
         (lambda: silhouette(scene.images[0], model, threshold=np.nan), "threshold must be a finite number"),
@@ -394,6 +401,26 @@ def test_cli_carves_and_writes(tmp_path, small_scene):
     assert abs(vol / hull_volume - 1) < 0.1            # a 32-voxel grid: ±1/2 voxel on a surface ~8 voxels thick
 
 
+def test_cli_warns_when_the_silhouettes_do_not_match(tmp_path, small_scene):
+    """Cameras shifted sideways by ±0.2 (alternately): the cones still meet, but the written model's silhouettes
+    overlap the masks poorly (median IoU ~0.14); success with a warning on stderr, not a silent one."""
+    par = write_scene(tmp_path, small_scene)
+    lines = par.read_text().splitlines()
+    for i in range(1, len(lines)):
+        tok = lines[i].split()
+        tok[19] = repr(float(tok[19]) + (0.2 if i % 2 else -0.2))
+        lines[i] = " ".join(tok)
+    par.write_text("\n".join(lines) + "\n")
+    r = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 2.5, "--quiet", cwd=tmp_path)
+    assert r.returncode == 0 and (tmp_path / "hull.ply").is_file(), r.stderr
+    warning = [line for line in r.stderr.splitlines() if line.startswith("carve: warning: ")]
+    assert len(warning) == 1 and "median IoU 0.1" in warning[0] and "look at --masks" in warning[0], r.stderr
+    (tmp_path / "good").mkdir()
+    par = write_scene(tmp_path / "good", small_scene)
+    r = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 2.5, "--quiet", cwd=par.parent)
+    assert r.returncode == 0 and "warning" not in r.stderr, r.stderr       # a good model: no warning
+
+
 def test_cli_help():
     r = _cli("--help", cwd=ROOT)
     assert r.returncode == 0 and "--grid" in r.stdout and "PAR_FILE" in r.stdout
@@ -403,7 +430,7 @@ def _listing(folder):
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
 
 
-@pytest.mark.parametrize("case", ["missing_par", "bad_line", "missing_image", "broken_image", "no_folder",
+@pytest.mark.parametrize("case", ["missing_par", "folder_par", "bad_line", "missing_image", "broken_image", "no_folder",
                                   "no_masks_folder", "empty_carve", "bad_grid", "bad_threshold"])
 def test_cli_errors(tmp_path, small_scene, case):
     par = write_scene(tmp_path, small_scene)
@@ -412,6 +439,9 @@ def test_cli_errors(tmp_path, small_scene, case):
     expect = None
     if case == "missing_par":
         args[0], expect = "nothing_par.txt", "nothing_par.txt: no such file"
+    elif case == "folder_par":
+        (tmp_path / "scene").mkdir()
+        args[0], expect = "scene", "scene: is a folder"
     elif case == "bad_line":
         par.write_text("\n".join(lines[:4] + [lines[4] + " 0"] + lines[5:]) + "\n")
         expect = "scene_par.txt, line 5: expected an image name and 21 numbers"

@@ -66,6 +66,23 @@ def test_carve_step_mistakes_get_their_hint(wrong, words):
     assert not report.passed and any(words in h for h in report.hints), report.hints
 
 
+def column_first(X, P, mask):
+    """Bounds checked right, then mask[col, row]: an IndexError on axis 0 for points inside the (wide) image."""
+    x_h = X @ P[:, :3].T + P[:, 3]
+    c, r = np.round(x_h[:, 0] / x_h[:, 2]).astype(int), np.round(x_h[:, 1] / x_h[:, 2]).astype(int)
+    h, w = mask.shape
+    ok = (c >= 0) & (c < w) & (r >= 0) & (r < h) & (x_h[:, 2] > 0)
+    keep = np.zeros(len(X), bool)
+    keep[ok] = mask[c[ok], r[ok]]
+    return keep
+
+
+def test_column_first_lookup_gets_the_y_first_hint():
+    report = check_carve_step(column_first, verbose=False)
+    assert not report.passed and any("mask[row, col] = mask[y, x], y first" in h for h in report.hints), report.hints
+    assert not any("projects outside the image" in h for h in report.hints), report.hints
+
+
 def wrap_around(X, P, mask):
     """Bounds checked only on the high side: negative indices wrap (no IndexError, a wrong answer)."""
     x_h = X @ P[:, :3].T + P[:, 3]

@@ -10,11 +10,18 @@ from labutils.exercises.ex10_model import (
     check_orient_normal,
     check_pca_normal,
 )
+from labutils.pointcloud import orient_normals
 from labutils.texturing import most_frontal_view
+
+
+def _library_orient(X, n, C, seen):
+    """labutils.pointcloud.orient_normals for one point, cameras given by their centres (R = I, t = -C)."""
+    return orient_normals(X[None], n[None], np.stack([np.eye(3)] * len(C)), -C, seen[:, None])[0]
 
 
 @pytest.mark.parametrize("check, func", [(check_pca_normal, _reference_pca_normal),
                                          (check_orient_normal, _reference_orient),
+                                         (check_orient_normal, _library_orient),
                                          (check_most_frontal_view, most_frontal_view)])
 def test_reference_passes(check, func):
     assert_passes(check, func, min_cases=3)
@@ -61,6 +68,9 @@ def _orient_variant(all_cameras=False, first_only=False, reversed_=False, partia
     (_orient_variant(first_only=True), "trusted one camera"),
     (_orient_variant(reversed_=True), "C_v - X (not X - C_v)"),
     (_orient_variant(partial=True), "the whole vector"),
+    (lambda X, n, C, seen: n if n @ (C[seen] - X).mean(0) >= 0 else -n,
+     "divide by ‖C_v − X‖: far cameras would outvote near ones"),
+    (lambda X, n, C, seen: n if np.sign((C[seen] - X) @ n).sum() >= 0 else -n, "votes with its cosine, not ±1"),
 ])
 def test_orient_mistakes_get_their_hint(wrong, words):
     report = check_orient_normal(wrong, verbose=False)

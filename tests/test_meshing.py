@@ -16,6 +16,14 @@ def sphere_points(n, centre=(0.0, 0.0, 0.0), radius=1.0):
     return np.asarray(centre) + radius * np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
 
 
+TETRA = (np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]),
+         np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+
+
+def test_mesh_volume_of_a_tetrahedron_from_lists():
+    assert mesh_volume(TETRA[0].tolist(), TETRA[1].tolist()) == pytest.approx(1 / 6)
+
+
 def edges_shared_twice(F):
     e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
     _, count = np.unique(e, axis=0, return_counts=True)
@@ -30,6 +38,15 @@ def edges_shared_twice(F):
     (lambda: delaunay_mesh(np.column_stack([np.random.default_rng(0).random((20, 2)), np.zeros(20)])), "one plane"),
     (lambda: delaunay_mesh(sphere_points(50), max_edge=1e-3), "no tetrahedron is left"),
     (lambda: delaunay_mesh(sphere_points(50).T), "X must have shape (N, 3)"),
+    # mesh_volume checks its faces like every mesh function (labutils._validation.as_mesh): F - 1 used to wrap -1 to
+    # the last vertex and give a plausible wrong volume; lists, floats and NaN gave IndexError / TypeError / nan
+    (lambda: mesh_volume(*TETRA[:1], TETRA[1] - 1), "faces hold vertex indices 0..3; got -1..2"),
+    (lambda: mesh_volume(TETRA[0].tolist(), TETRA[1].tolist()[:3] + [[1, 2, 4]]), "vertex indices 0..3; got 0..4"),
+    (lambda: mesh_volume(TETRA[0], TETRA[1].astype(float)), "(F, 3) integer array of triangles; got shape (4, 3), "
+                                                            "dtype float64"),
+    (lambda: mesh_volume(TETRA[0] * [1, 1, np.nan], TETRA[1]), "vertices has non-finite coordinates"),
+    (lambda: mesh_volume(TETRA[0], [[0, 1, 2], [0, 1]]), "(F, 3) integer array of triangles"),
+    (lambda: mesh_volume(TETRA[0], np.zeros((0, 3), int)), "faces is empty"),
 ])
 def test_bad_input_is_a_clear_error(call, words):
     with pytest.raises(ValueError) as exc:

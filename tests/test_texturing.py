@@ -44,7 +44,10 @@ def snowman():
     (lambda: render_depth(np.eye(3), [[0, 1, 2]], np.eye(3), np.eye(3), np.zeros(3), (4,)), "image_size"),
     (lambda: most_frontal_view(np.zeros((2, 3)), [[0, 0, 1.0]] * 2, np.ones((3, 3)), np.ones((2, 3), bool)),
      "transposed"),
-    (lambda: edge_contrast(np.zeros((3, 3)), [[0, 1, 5]]), "indices into colors"),
+    (lambda: edge_contrast(np.zeros((3, 3)), [[0, 1, 5]]), "faces hold vertex indices 0..2; got 0..5"),
+    (lambda: edge_contrast(np.zeros((3, 3)), [[0, 1, 2.0]]), "(F, 3) integer array of triangles"),  # was IndexError
+    (lambda: edge_contrast([[0, 0, 0], [9, 9, 9], [0, 0, np.nan]], [[0, 1, 2]]), "colors has non-finite"),  # was nan
+    (lambda: edge_contrast(np.zeros((3, 3)), [[0, 1, -1]]), "faces hold vertex indices 0..2; got -1..1"),
 ])
 def test_bad_input_is_a_clear_error(call, words):
     with pytest.raises(ValueError) as exc:

@@ -37,9 +37,9 @@ def _as_image(image, name="image"):
 
 def _as_mask(mask, name="mask", shape=None):
     a = np.asarray(mask)
-    if a.ndim != 2 or (a.dtype != bool and not (a.dtype.kind in "iu" and a.size and a.max() <= 1 and a.min() >= 0)
-                       and not (a.dtype.kind in "iu" and a.size == 0)):
-        raise ValueError(f"{name} must be a (H, W) boolean mask; got shape {a.shape} and dtype {a.dtype}")
+    if a.ndim != 2 or a.size == 0 or (a.dtype != bool and not (a.dtype.kind in "iu" and a.max() <= 1
+                                                                and a.min() >= 0)):
+        raise ValueError(f"{name} must be a (H, W) boolean mask with H, W > 0; got shape {a.shape} and dtype {a.dtype}")
     if shape is not None and a.shape != tuple(shape):
         raise ValueError(f"{name} has shape {a.shape}; expected {tuple(shape)}")
     return a.astype(bool)

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from skimage.measure import marching_cubes
 
-from .._validation import as_image_size, as_points
+from .._validation import as_image_size, as_mesh
 from .silhouettes import _as_number, clean_mask, mask_iou, signed_distance_map
 from .voxels import (
     Carving,
@@ -75,7 +75,8 @@ def mesh_volume(vertices: ArrayLike, faces: ArrayLike) -> float:
     >>> round(mesh_volume(V, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])), 6)
     0.166667
     """
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    V, F = as_mesh(vertices, faces)
+    a, b, c = (V[F[:, k]] for k in range(3))
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
@@ -111,12 +112,7 @@ def render_silhouette(vertices: ArrayLike, faces: ArrayLike, P: ArrayLike, image
            [1, 1, 1, 0],
            [1, 1, 0, 0]])
     """
-    V = as_points(vertices, "vertices", dim=3)
-    F = np.asarray(faces)
-    if F.ndim != 2 or F.shape[1] != 3 or (F.size and F.dtype.kind not in "iu"):
-        raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
-    if F.size and (F.min() < 0 or F.max() >= len(V)):
-        raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
+    V, F = as_mesh(vertices, faces, allow_empty=True)
     w, h = as_image_size(image_size)
     if F.size == 0:
         return np.zeros((h, w), bool)

@@ -109,6 +109,13 @@ def _diagnose_orient(out, X, n, C, seen):
         if np.allclose(out, n if first >= 0 else -n):
             return ("you trusted one camera; a single view can look at the surface almost edge-on, on the wrong side "
                     "of a noisy normal: sum the cosines over all the cameras that see the point")
+        d = C[seen] - X
+        if np.allclose(out, n if d.sum(0) @ n >= 0 else -n):
+            return ("you summed (C_v - X) · n without normalising: divide by ‖C_v − X‖: far cameras would outvote near "
+                    "ones (each camera's vote is the cosine of its angle to the normal)")
+        if np.allclose(out, n if np.sign(d @ n).sum() >= 0 else -n):
+            return ("each camera votes with its cosine, not ±1: a camera that sees the surface head-on counts more "
+                    "than two that graze it from behind")
         return ("your normal points away from the cameras: the direction to camera v is C_v - X (not X - C_v), and "
                 "the normal must make a positive sum of cosines with these directions")
     if np.allclose(np.abs(out), np.abs(n)) or np.isclose(abs(out @ n), 1.0):
@@ -119,8 +126,9 @@ def _diagnose_orient(out, X, n, C, seen):
 def check_orient_normal(orient_normal, verbose=True):
     """Self-check of ``orient_normal(X, n, C, seen) -> (3,)``: ``n`` or ``-n``, facing the cameras that see ``X``.
 
-    Cases: one camera, a ring of cameras of which only some see the point, and a point whose first observing camera
-    looks at it edge-on from the wrong side of a noisy normal.
+    Cases: one camera, a ring of cameras of which only some see the point, a point whose first observing camera
+    looks at it edge-on from the wrong side of a noisy normal, near cameras outvoting a far one (the cosine divides by
+    the distance), and one head-on camera outweighing two grazing ones (a cosine, not a ±1 vote).
 
     Examples
     --------
@@ -150,10 +158,23 @@ def check_orient_normal(orient_normal, verbose=True):
         seen = np.ones(4, bool)
         return run(f, X, -n, C, seen)
 
+    def near_far(f):
+        X, n = np.zeros(3), np.array([0.0, 0, 1])
+        C = np.array([[0.1, 0, -0.5], [-0.1, 0, -0.5], [0.0, 0, 10]])       # two near cameras behind, one far in front
+        return run(f, X, n, C, np.ones(3, bool))                            # cosines -0.98, -0.98, +1: expect -n
+
+    def cosine_vote(f):
+        X, n = np.zeros(3), np.array([0.0, 0, 1])
+        s = np.sqrt(0.99)
+        C = 4 * np.array([[np.sqrt(0.19), 0, 0.9], [s, 0, -0.1], [-s, 0, -0.1]])   # cosines 0.9, -0.1, -0.1
+        return run(f, X, n, C, np.ones(3, bool))                            # 0.9 - 0.2 > 0: expect n (votes: -1)
+
     return run_checks("orient_normal", orient_normal, [
         ("one camera in front, then behind", one),
         ("cameras all around, three of which see the point", ring),
         ("the first observing camera is edge-on", grazing),
+        ("near and far cameras", near_far),
+        ("one camera head-on, two grazing from behind", cosine_vote),
     ], verbose=verbose)
 
 

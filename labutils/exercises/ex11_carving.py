@@ -122,6 +122,27 @@ def _variant(X, P, mask, *, swap=False, divide=True, rnd="round", bounds=True, d
     return out
 
 
+def _index_error_inside(f, X, P, mask):
+    """Whether ``f`` raises an IndexError on an axis-0 lookup of a non-square mask even when given only the points
+    that project inside the image, in front of the camera (then it indexes mask[col, row], not a bounds slip)."""
+    h, w = mask.shape
+    if h == w:
+        return False
+    x_h = X @ P[:, :3].T + P[:, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c, r = np.floor(x_h[:, 0] / x_h[:, 2] + 0.5), np.floor(x_h[:, 1] / x_h[:, 2] + 0.5)
+    inside = (x_h[:, 2] > 0) & (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    if not inside.any():
+        return False
+    try:
+        f(X[inside].copy(), P.copy(), mask.copy())
+    except IndexError as exc:
+        return "axis 0" in str(exc)
+    except Exception:                                      # any other failure: not this diagnosis
+        return False
+    return False
+
+
 def _diagnose_carve(keep, X, P, mask):
     ref = inside_silhouette(X, P, mask)
     if np.array_equal(keep, ref):
@@ -173,6 +194,10 @@ def check_carve_step(carve_step, verbose=True):
         try:
             keep = f(X.copy(), P.copy(), mask.copy())
         except IndexError as exc:
+            if _index_error_inside(f, X, P, mask):        # points inside the image fail too: the lookup's order
+                return (f"IndexError ({exc}) for points inside the image: index the mask as mask[row, col] = "
+                        f"mask[y, x], y first (the mask is H x W = {mask.shape[0]} x {mask.shape[1]}; mask[col, row] "
+                        "goes past the last row as soon as a column exceeds H - 1)")
             return (f"IndexError ({exc}): a point projects outside the image; carve it away instead of indexing the "
                     "mask (check 0 <= column < W and 0 <= row < H first)")
         return _diagnose_carve(_as_keep(keep, len(X)), X, P, mask)
