@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ._validation import as_image_size, as_matrix, as_points, as_rotation
+from ._validation import as_image_size, as_points, as_rotation, as_vector3
 from .datapath import DataNotFoundError, find_data
 from .geometry import rotation_from_angle_axis
 from .lens import as_distortion, as_intrinsics, project_points, undistort_normalised
@@ -297,7 +297,7 @@ def render_board(K, dist, R, t, *, board=(9, 6), square=0.025, image_size=(640, 
     K = as_intrinsics(K)
     dist = as_distortion(dist)
     R = as_rotation(R, "R")
-    t = as_matrix(np.asarray(t, float).reshape(-1), "t", (3,))
+    t = as_vector3(t, "t")
     nx, ny = _board(board)
     w, h = as_image_size(image_size)
     s = int(supersample)

@@ -12,7 +12,7 @@ A point ``x_cam`` in the camera frame is seen at
 """
 import numpy as np
 
-from ._validation import as_array, as_calibration, as_matrix, as_points, as_rotation
+from ._validation import as_array, as_calibration, as_matrix, as_points, as_rotation, as_vector3
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
@@ -222,7 +222,7 @@ def project_points(X, K, dist, R, t):
     if K[0, 1] != 0:
         raise ValueError(f"K must have zero skew (K[0, 1] = 0) for this model; got {K[0, 1]:.6g}")
     R = as_rotation(R, "R")
-    t = as_matrix(np.asarray(t, float).reshape(-1), "t", (3,))
+    t = as_vector3(t, "t")
     Xc = X @ R.T + t
     if np.any(Xc[:, 2] <= 0):
         bad = np.flatnonzero(Xc[:, 2] <= 0)

@@ -73,6 +73,12 @@ def rendered():
 
 # --- shapes and bad input ----------------------------------------------------------------------------------------
 
+def test_project_points_refuses_a_column_t():
+    """A (3, 1) t (OpenCV's tvec) is refused by name, not flattened: the house rule is never to reshape silently."""
+    with pytest.raises(ValueError, match=r"t must have shape \(3,\)"):
+        project_points([[0.0, 0.0, 2.0]], np.diag([500.0, 500, 1]), np.zeros(5), np.eye(3), np.zeros((3, 1)))
+
+
 def test_distort_rejects_bad_input():
     with pytest.raises(ValueError, match=r"xn must have shape \(N, 2\)"):
         distort(np.zeros((3, 3)), np.zeros(5))
