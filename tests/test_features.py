@@ -134,6 +134,12 @@ def test_pixel_scaling_round_trip_and_bad_input():
         ft.to_original_pixels(np.zeros((3, 3)), 0.5)
     with pytest.raises(ValueError, match="scale must be a positive number"):
         ft.scale_calibration(np.eye(3), 0.0)
+    for bad in (0.0, -1.0, np.nan, np.inf, "0.5", None):   # 0 gave inf pixels, -1 plausible wrong ones
+        for fn in (ft.to_original_pixels, ft.to_working_pixels):
+            with pytest.raises(ValueError, match="scale must be a positive number"):
+                fn(x, bad)
+    with pytest.raises(ValueError, match="scale must be a positive number"):   # was a TypeError
+        ft.scale_calibration(np.eye(3), "0.5")
 
 
 def test_read_gray_errors_name_the_file(tmp_path):
@@ -208,6 +214,25 @@ def test_build_tracks_invariants(rng):
     shuffled = dict(reversed(list(pm.items())))
     t2 = ft.build_tracks(shuffled, [n] * V)
     assert {tuple(c) for c in t2.T.tolist()} == {tuple(c) for c in tracks.T.tolist()}
+
+
+def test_track_pixels_statistics_and_verify_bad_input():
+    xy = [np.zeros((3, 2)), np.zeros((2, 2))]
+    with pytest.raises(ValueError, match=r"tracks\[1\] holds feature index 2, but xy\[1\] has only 2"):
+        ft.track_pixels([[0, 1], [1, 2]], xy)                   # was a bare IndexError
+    with pytest.raises(ValueError, match="integer feature indices"):
+        ft.track_pixels([[0, 1], [1, 0.5]], xy)
+    with pytest.raises(ValueError, match=r"xy\[0\] must have shape \(N, 2\)"):
+        ft.track_pixels([[0, 1], [1, 0]], [np.zeros((3, 3)), np.zeros((2, 2))])
+    with pytest.raises(ValueError, match=r"geometry keys must be pairs of views .* 0 <= i, j < 2"):
+        ft.verify_tracks(np.zeros((2, 1, 2)), {(0, 2): np.eye(3)}, 1.0)   # was a bare IndexError
+    with pytest.raises(ValueError, match="geometry keys"):
+        ft.verify_tracks(np.zeros((2, 1, 2)), {(-1, 1): np.eye(3)}, 1.0)  # -1 would silently be the last view
+    x = np.full((3, 5, 2), 1.0)
+    with pytest.raises(ValueError, match=r"x must have shape \(V, T, 2\)"):
+        ft.track_statistics(x.transpose(0, 2, 1))               # (V, 2, T): once 2 tracks of length 3
+    empty = ft.track_statistics(np.zeros((3, 0, 2)))            # the CLI's case: no track survived
+    assert empty["tracks"] == 0 and empty["mean_length"] == 0.0 and empty["length_counts"].tolist() == [0] * 4
 
 
 def test_union_find_labels():
