@@ -102,7 +102,11 @@ def test_select_pairs():
     assert len(ft.select_pairs(36, "ring", 2)) == 72 and len(ft.select_pairs(36, "sequence", 2)) == 69
     p = ft.select_pairs(10, "sequence", 3)
     assert (p[:, 0] < p[:, 1]).all() and (p[:, 1] - p[:, 0] <= 3).all() and len(p) == 9 + 8 + 7
-    for kwargs, words in [(dict(n_views=1), "at least 2"), (dict(n_views=5, strategy="ring"), "needs a window"),
+    for kwargs, words in [(dict(n_views=1), "n_views must be an integer >= 2"),
+                          (dict(n_views=5, strategy="ring"), "needs a window"),
+                          (dict(n_views=5, strategy="sequence", window=1.5), "window must be an integer >= 1; got 1.5"),
+                          (dict(n_views=5, strategy="ring", window=0), "window must be an integer >= 1"),
+                          (dict(n_views=4.5), "n_views must be an integer"),
                           (dict(n_views=5, strategy="random"), "'all', 'sequence' or 'ring'")]:
         with pytest.raises(ValueError, match=words):
             ft.select_pairs(**kwargs)
@@ -349,6 +353,24 @@ def test_retrieval_pairs_find_neighbours():
     ring = {tuple(sorted((v, (v + 1) % V))) for v in range(V)}
     assert ring <= {tuple(p) for p in pairs.tolist()}
     assert np.allclose(np.diag(S), 1.0) and S.shape == (V, V)
+    for kwargs, words in [(dict(n_neighbours=0), "n_neighbours must be an integer >= 1; got 0"),
+                          (dict(n_neighbours=-1), "n_neighbours must be an integer >= 1"),  # once almost all pairs
+                          (dict(n_neighbours=1.5), "n_neighbours must be an integer"),
+                          (dict(n_neighbours=2, vocabulary_size=0), "vocabulary_size must be an integer >= 1"),
+                          (dict(n_neighbours=2, sample=100), "sample must be >= vocabulary_size = 256"),
+                          (dict(n_neighbours=2, sample=0), "sample must be an integer >= 1")]:
+        with pytest.raises(ValueError, match=words):
+            ft.retrieval_pairs(D, rng=np.random.default_rng(0), **kwargs)
+
+
+def test_retrieval_similarity_of_an_image_with_only_common_words():
+    """An image whose words all appear in every image has idf 0 everywhere: a zero row, also on the diagonal."""
+    rng = np.random.default_rng(0)
+    common, own1, own2 = (rng.normal(0, 1, (1, 8)) * 100 for _ in range(3))
+    blob = lambda c, n: (c + rng.normal(0, 0.1, (n, 8))).astype(np.float32)  # noqa: E731
+    D = [blob(common, 30), np.vstack([blob(common, 30), blob(own1, 30)]), np.vstack([blob(common, 30), blob(own2, 30)])]
+    _, S = ft.retrieval_pairs(D, 1, rng=np.random.default_rng(0), vocabulary_size=3, sample=200)
+    assert np.all(S[0] == 0) and np.all(S[:, 0] == 0) and np.allclose(S[1, 1], 1.0) and np.allclose(S[2, 2], 1.0)
 
 
 # --- OpenCV as the reference ----------------------------------------------------------------------------------
