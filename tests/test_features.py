@@ -97,6 +97,18 @@ def test_images_pairs_and_thresholds_bad_input():
         ft.verify_tracks(np.zeros((2, 1, 2)), {}, 0.0)
 
 
+def test_rng_checks_name_what_they_got():
+    """One check (_validation.as_rng) for every function of the matching chapter that draws random numbers."""
+    from labutils.synthetic_images import blob_texture
+
+    f = [ft.Features(np.zeros((0, 2)), np.zeros((0, 8), np.float32))] * 2
+    calls = [lambda r: ft.match_views(f, [[0, 1]], rng=r), lambda r: blob_texture(16, rng=r),
+             lambda r: render_corner(2, rng=r), lambda r: ft.retrieval_pairs([np.zeros((4, 8))] * 2, 1, rng=r)]
+    for call in calls:
+        with pytest.raises(ValueError, match=r"rng must be a numpy.random.Generator, .*; got 0"):
+            call(0)
+
+
 def test_select_pairs():
     assert len(ft.select_pairs(36)) == 630
     assert len(ft.select_pairs(36, "ring", 2)) == 72 and len(ft.select_pairs(36, "sequence", 2)) == 69

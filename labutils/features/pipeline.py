@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import as_array, as_calibration, as_positive
+from .._validation import as_array, as_calibration, as_positive, as_rng
 from .descriptors import Features, match_descriptors
 from .geometric import epipolar_filter
 from .tracks import build_tracks, track_pixels, verify_tracks
@@ -80,8 +80,7 @@ def match_views(features: Sequence[Features], pairs: ArrayLike, *, rng: np.rando
     -------
     MatchResult
     """
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    as_rng(rng)
     V = len(features)
     pairs = _as_pairs(pairs, V)
     Ks = None if K is None else as_calibration(K, "K", n_views=V, like_name="features")
