@@ -137,6 +137,21 @@ def test_epipolar_filter_bad_input(rng):
         ft.epipolar_filter(x1, x2, rng=None)
     with pytest.raises(ValueError, match="ranking must have one value per match"):
         ft.epipolar_filter(np.tile(x1, (3, 1)), np.tile(x2, (3, 1)), rng=rng, ranking=np.zeros(5))
+    with pytest.raises(ValueError, match=r"ranking must have one value per match \(30\); got shape \(5,\)"):
+        ft.epipolar_filter(x1, x2, rng=rng, ranking=np.zeros(5))        # N < 40: once not checked at all
+    with pytest.raises(ValueError, match=r"ranking must have one value per match \(30\); got shape \(30, 1\)"):
+        ft.epipolar_filter(x1, x2, rng=rng, ranking=np.zeros((30, 1)))  # no silent reshape
+
+
+def test_match_views_refuses_arrays_for_features():
+    f = ft.Features(np.zeros((0, 2)), np.zeros((0, 8), np.float32))
+    with pytest.raises(ValueError, match=r"features must be a sequence of Features .*features\[1\] is a ndarray"):
+        ft.match_views([f, np.zeros((5, 8))], [[0, 1]], rng=np.random.default_rng(0))   # was an AttributeError
+    with pytest.raises(ValueError, match="features must be a sequence of Features .*got a Features"):
+        ft.match_views(f, [[0, 1]], rng=np.random.default_rng(0))
+    res = ft.match_views([f, f], [[0, 1]], rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match=r"features\[0\] is a ndarray"):
+        ft.tracks_from_matches([np.zeros((0, 2))] * 2, res)
 
 
 def test_pixel_scaling_round_trip_and_bad_input():
