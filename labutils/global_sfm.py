@@ -34,6 +34,7 @@ from .reconstruction import Reconstruction, masked_reprojection_errors
 from .rotation_averaging import largest_component, rotation_averaging
 from .triangulation import triangulate_tracks
 from .twoview import two_view_reconstruction
+from .view_selection import covisibility
 
 
 @dataclass
@@ -94,8 +95,7 @@ def candidate_pairs(tracks: ArrayLike, *, min_shared: int = 15, n_partners: int 
     """
     tracks = as_tracks(tracks, min_views=2)
     min_shared = as_count(min_shared, "min_shared", 1)
-    seen = np.all(np.isfinite(tracks), axis=-1).astype(np.int64)
-    cov = seen @ seen.T
+    cov = covisibility(tracks)
     V = len(cov)
     np.fill_diagonal(cov, -1)
     keep = np.zeros((V, V), bool)

@@ -34,18 +34,26 @@ from .geometry import angle_axis_from_rotation, rotation_from_angle_axis
 LOSSES = ("l2", "l1", "cauchy")
 
 
-def as_pairs(pairs: ArrayLike, n_views: int) -> np.ndarray:
+def as_pairs(pairs: ArrayLike, n_views: int, *, allow_empty: bool = False) -> np.ndarray:
     """Check the edges of a view graph: ``(E, 2)`` view indices in ``0..n_views-1``, two different views each.
+
+    With ``allow_empty``, a graph without edges (``E = 0``, also written ``[]``) and a single view are accepted.
 
     >>> as_pairs([[0, 0]], 2)
     Traceback (most recent call last):
     ...
     ValueError: pairs[0] joins view 0 to itself: an edge needs two different views
+    >>> as_pairs([], 3, allow_empty=True).shape
+    (0, 2)
     """
-    n_views = as_count(n_views, "n_views", 2)
+    n_views = as_count(n_views, "n_views", 1 if allow_empty else 2)
     p = as_array(pairs, "pairs", "(E, 2)")
+    if allow_empty and p.shape in ((0,), (0, 2)):
+        return np.zeros((0, 2), int)
     if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] == 0:
-        raise ValueError(f"pairs must have shape (E, 2) with E >= 1 (one row (i, j) per edge); got shape {p.shape}")
+        at_least = 0 if allow_empty else 1
+        raise ValueError(f"pairs must have shape (E, 2) with E >= {at_least} (one row (i, j) per edge); "
+                         f"got shape {p.shape}")
     if not np.all(np.isfinite(p)) or np.any(p != np.round(p)) or p.min() < 0 or p.max() >= n_views:
         raise ValueError(f"pairs must hold view indices, integers in 0..{n_views - 1}; got values from "
                          f"{np.nanmin(p):g} to {np.nanmax(p):g}")
@@ -87,11 +95,14 @@ def as_view_graph(pairs: ArrayLike, R_rel: ArrayLike, n_views: int, weights: Arr
 def largest_component(pairs: ArrayLike, n_views: int) -> np.ndarray:
     """(V,) bool: the views of the largest connected part of the view graph (ties: the one with the lowest view).
 
+    ``pairs`` is checked as by :func:`as_pairs` (view indices in ``0..n_views-1``), but may be empty: then every
+    view is its own part and view 0 is returned.
+
     >>> largest_component([[0, 1], [1, 2], [3, 4]], 6).tolist()
     [True, True, True, False, False, False]
     """
-    n_views = as_count(n_views, "n_views", 1)
-    p = np.asarray(pairs, int).reshape(-1, 2)
+    p = as_pairs(pairs, n_views, allow_empty=True)
+    n_views = int(n_views)
     A = scipy.sparse.coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n_views, n_views))
     _, label = scipy.sparse.csgraph.connected_components(A, directed=False)
     sizes = np.bincount(label)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_points
+from ._validation import as_points, as_rng
 
 __all__ = ["RenderedScene", "render_corner", "blob_texture", "look_at"]
 
@@ -69,8 +69,7 @@ def blob_texture(size: int, *, rng: np.random.Generator, n_blobs: int = 400,
     """
     import cv2
 
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    as_rng(rng)
     img = np.full((size, size), 128, np.uint8)
     for _ in range(int(n_blobs)):
         c = rng.integers(0, size, 2)
@@ -196,8 +195,7 @@ def render_corner(n_views: int = 6, image_size: tuple[int, int] = (320, 240), *,
     """
     import cv2
 
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    as_rng(rng)
     if int(n_views) < 2:
         raise ValueError(f"n_views must be at least 2; got {n_views}")
     w, h = (int(v) for v in image_size)

@@ -218,9 +218,9 @@ def next_view(visible_points, registered, skip=(), scores=None, min_points=1):
         For each view, how many triangulated points it observes.
     registered : (V,) bool array_like
     skip : collection of int
-        Views not to propose now (e.g. whose registration just failed).
+        Views (indices in ``0..V-1``) not to propose now (e.g. whose registration just failed).
     scores : (V,) array_like, optional
-        The strategy's score of each view, higher is better (one of this module's strategies); default
+        The strategy's score of each view, higher is better, no NaN (:func:`as_scores`); default
         ``visible_points`` (the view that sees the most points).
     min_points : int
         Fewest triangulated points a candidate must see (PnP needs them: ``min_inliers``).
@@ -235,12 +235,22 @@ def next_view(visible_points, registered, skip=(), scores=None, min_points=1):
     >>> next_view([5, 9, 7, 3], [False, True, False, False], scores=[0, 0, 1, 2], min_points=4)
     2
     """
-    counts = np.asarray(visible_points, float)
-    ok = (counts >= max(min_points, 1)) & ~np.asarray(registered, bool)
-    ok[list(skip)] = False
+    counts = as_array(visible_points, "visible_points", "(V,)")
+    if counts.ndim != 1:
+        raise ValueError(f"visible_points must have shape (V,) (one count per view); got shape {counts.shape}")
+    V = len(counts)
+    registered = np.asarray(registered)
+    if registered.shape != (V,):
+        raise ValueError(f"registered must have shape ({V},) like visible_points; got shape {registered.shape}")
+    skip = list(skip)
+    bad = [w for w in skip if not (isinstance(w, (int, np.integer)) and 0 <= w < V)]
+    if bad:
+        raise ValueError(f"skip must hold view indices, integers in 0..{V - 1}; got {bad[0]!r}")
+    s = counts if scores is None else as_scores(scores, V)
+    ok = (counts >= max(min_points, 1)) & ~registered.astype(bool)
+    ok[skip] = False
     if not ok.any():
         return None
-    s = counts if scores is None else np.asarray(scores, float)
     return int(np.flatnonzero(ok)[np.argmax(s[ok])])
 
 

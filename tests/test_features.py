@@ -97,12 +97,28 @@ def test_images_pairs_and_thresholds_bad_input():
         ft.verify_tracks(np.zeros((2, 1, 2)), {}, 0.0)
 
 
+def test_rng_checks_name_what_they_got():
+    """One check (_validation.as_rng) for every function of the matching chapter that draws random numbers."""
+    from labutils.synthetic_images import blob_texture
+
+    f = [ft.Features(np.zeros((0, 2)), np.zeros((0, 8), np.float32))] * 2
+    calls = [lambda r: ft.match_views(f, [[0, 1]], rng=r), lambda r: blob_texture(16, rng=r),
+             lambda r: render_corner(2, rng=r), lambda r: ft.retrieval_pairs([np.zeros((4, 8))] * 2, 1, rng=r)]
+    for call in calls:
+        with pytest.raises(ValueError, match=r"rng must be a numpy.random.Generator, .*; got 0"):
+            call(0)
+
+
 def test_select_pairs():
     assert len(ft.select_pairs(36)) == 630
     assert len(ft.select_pairs(36, "ring", 2)) == 72 and len(ft.select_pairs(36, "sequence", 2)) == 69
     p = ft.select_pairs(10, "sequence", 3)
     assert (p[:, 0] < p[:, 1]).all() and (p[:, 1] - p[:, 0] <= 3).all() and len(p) == 9 + 8 + 7
-    for kwargs, words in [(dict(n_views=1), "at least 2"), (dict(n_views=5, strategy="ring"), "needs a window"),
+    for kwargs, words in [(dict(n_views=1), "n_views must be an integer >= 2"),
+                          (dict(n_views=5, strategy="ring"), "needs a window"),
+                          (dict(n_views=5, strategy="sequence", window=1.5), "window must be an integer >= 1; got 1.5"),
+                          (dict(n_views=5, strategy="ring", window=0), "window must be an integer >= 1"),
+                          (dict(n_views=4.5), "n_views must be an integer"),
                           (dict(n_views=5, strategy="random"), "'all', 'sequence' or 'ring'")]:
         with pytest.raises(ValueError, match=words):
             ft.select_pairs(**kwargs)
@@ -121,6 +137,21 @@ def test_epipolar_filter_bad_input(rng):
         ft.epipolar_filter(x1, x2, rng=None)
     with pytest.raises(ValueError, match="ranking must have one value per match"):
         ft.epipolar_filter(np.tile(x1, (3, 1)), np.tile(x2, (3, 1)), rng=rng, ranking=np.zeros(5))
+    with pytest.raises(ValueError, match=r"ranking must have one value per match \(30\); got shape \(5,\)"):
+        ft.epipolar_filter(x1, x2, rng=rng, ranking=np.zeros(5))        # N < 40: once not checked at all
+    with pytest.raises(ValueError, match=r"ranking must have one value per match \(30\); got shape \(30, 1\)"):
+        ft.epipolar_filter(x1, x2, rng=rng, ranking=np.zeros((30, 1)))  # no silent reshape
+
+
+def test_match_views_refuses_arrays_for_features():
+    f = ft.Features(np.zeros((0, 2)), np.zeros((0, 8), np.float32))
+    with pytest.raises(ValueError, match=r"features must be a sequence of Features .*features\[1\] is a ndarray"):
+        ft.match_views([f, np.zeros((5, 8))], [[0, 1]], rng=np.random.default_rng(0))   # was an AttributeError
+    with pytest.raises(ValueError, match="features must be a sequence of Features .*got a Features"):
+        ft.match_views(f, [[0, 1]], rng=np.random.default_rng(0))
+    res = ft.match_views([f, f], [[0, 1]], rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match=r"features\[0\] is a ndarray"):
+        ft.tracks_from_matches([np.zeros((0, 2))] * 2, res)
 
 
 def test_pixel_scaling_round_trip_and_bad_input():
@@ -134,6 +165,12 @@ def test_pixel_scaling_round_trip_and_bad_input():
         ft.to_original_pixels(np.zeros((3, 3)), 0.5)
     with pytest.raises(ValueError, match="scale must be a positive number"):
         ft.scale_calibration(np.eye(3), 0.0)
+    for bad in (0.0, -1.0, np.nan, np.inf, "0.5", None):   # 0 gave inf pixels, -1 plausible wrong ones
+        for fn in (ft.to_original_pixels, ft.to_working_pixels):
+            with pytest.raises(ValueError, match="scale must be a positive number"):
+                fn(x, bad)
+    with pytest.raises(ValueError, match="scale must be a positive number"):   # was a TypeError
+        ft.scale_calibration(np.eye(3), "0.5")
 
 
 def test_read_gray_errors_name_the_file(tmp_path):
@@ -208,6 +245,25 @@ def test_build_tracks_invariants(rng):
     shuffled = dict(reversed(list(pm.items())))
     t2 = ft.build_tracks(shuffled, [n] * V)
     assert {tuple(c) for c in t2.T.tolist()} == {tuple(c) for c in tracks.T.tolist()}
+
+
+def test_track_pixels_statistics_and_verify_bad_input():
+    xy = [np.zeros((3, 2)), np.zeros((2, 2))]
+    with pytest.raises(ValueError, match=r"tracks\[1\] holds feature index 2, but xy\[1\] has only 2"):
+        ft.track_pixels([[0, 1], [1, 2]], xy)                   # was a bare IndexError
+    with pytest.raises(ValueError, match="integer feature indices"):
+        ft.track_pixels([[0, 1], [1, 0.5]], xy)
+    with pytest.raises(ValueError, match=r"xy\[0\] must have shape \(N, 2\)"):
+        ft.track_pixels([[0, 1], [1, 0]], [np.zeros((3, 3)), np.zeros((2, 2))])
+    with pytest.raises(ValueError, match=r"geometry keys must be pairs of views .* 0 <= i, j < 2"):
+        ft.verify_tracks(np.zeros((2, 1, 2)), {(0, 2): np.eye(3)}, 1.0)   # was a bare IndexError
+    with pytest.raises(ValueError, match="geometry keys"):
+        ft.verify_tracks(np.zeros((2, 1, 2)), {(-1, 1): np.eye(3)}, 1.0)  # -1 would silently be the last view
+    x = np.full((3, 5, 2), 1.0)
+    with pytest.raises(ValueError, match=r"x must have shape \(V, T, 2\)"):
+        ft.track_statistics(x.transpose(0, 2, 1))               # (V, 2, T): once 2 tracks of length 3
+    empty = ft.track_statistics(np.zeros((3, 0, 2)))            # the CLI's case: no track survived
+    assert empty["tracks"] == 0 and empty["mean_length"] == 0.0 and empty["length_counts"].tolist() == [0] * 4
 
 
 def test_union_find_labels():
@@ -324,6 +380,24 @@ def test_retrieval_pairs_find_neighbours():
     ring = {tuple(sorted((v, (v + 1) % V))) for v in range(V)}
     assert ring <= {tuple(p) for p in pairs.tolist()}
     assert np.allclose(np.diag(S), 1.0) and S.shape == (V, V)
+    for kwargs, words in [(dict(n_neighbours=0), "n_neighbours must be an integer >= 1; got 0"),
+                          (dict(n_neighbours=-1), "n_neighbours must be an integer >= 1"),  # once almost all pairs
+                          (dict(n_neighbours=1.5), "n_neighbours must be an integer"),
+                          (dict(n_neighbours=2, vocabulary_size=0), "vocabulary_size must be an integer >= 1"),
+                          (dict(n_neighbours=2, sample=100), "sample must be >= vocabulary_size = 256"),
+                          (dict(n_neighbours=2, sample=0), "sample must be an integer >= 1")]:
+        with pytest.raises(ValueError, match=words):
+            ft.retrieval_pairs(D, rng=np.random.default_rng(0), **kwargs)
+
+
+def test_retrieval_similarity_of_an_image_with_only_common_words():
+    """An image whose words all appear in every image has idf 0 everywhere: a zero row, also on the diagonal."""
+    rng = np.random.default_rng(0)
+    common, own1, own2 = (rng.normal(0, 1, (1, 8)) * 100 for _ in range(3))
+    blob = lambda c, n: (c + rng.normal(0, 0.1, (n, 8))).astype(np.float32)  # noqa: E731
+    D = [blob(common, 30), np.vstack([blob(common, 30), blob(own1, 30)]), np.vstack([blob(common, 30), blob(own2, 30)])]
+    _, S = ft.retrieval_pairs(D, 1, rng=np.random.default_rng(0), vocabulary_size=3, sample=200)
+    assert np.all(S[0] == 0) and np.all(S[:, 0] == 0) and np.allclose(S[1, 1], 1.0) and np.allclose(S[2, 2], 1.0)
 
 
 # --- OpenCV as the reference ----------------------------------------------------------------------------------

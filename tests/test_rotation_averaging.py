@@ -80,6 +80,19 @@ def test_bad_rotations_weights_and_graphs():
 
 def test_largest_component():
     assert largest_component([[0, 1], [2, 3], [3, 4]], 6).tolist() == [False, False, True, True, True, False]
+    assert largest_component([], 3).tolist() == [True, False, False]
+    assert largest_component(np.zeros((0, 2), int), 1).tolist() == [True]
+
+
+def test_largest_component_refuses_bad_pairs():
+    with pytest.raises(ValueError, match=r"pairs must have shape \(E, 2\)"):
+        largest_component([[0, 1, 2], [1, 2, 3]], 4)  # (2, 3): once read as three edges
+    with pytest.raises(ValueError, match="pairs must hold view indices"):
+        largest_component([[0, 5]], 4)
+    with pytest.raises(ValueError, match="pairs must hold view indices"):
+        largest_component([[0, np.nan]], 4)
+    with pytest.raises(ValueError, match="n_views must be an integer"):
+        largest_component([[0, 1]], 0)
 
 
 # --- SO(3) projection -------------------------------------------------------------------------------------------

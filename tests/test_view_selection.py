@@ -72,6 +72,22 @@ def test_other_scores_and_the_choice():
     assert next_view([0, 2, 2], [False, False, False]) == 1                              # ties: the lowest view
 
 
+def test_next_view_bad_input():
+    counts, reg = [5, 5, 5], [False, False, False]
+    with pytest.raises(ValueError, match="NaN scores"):
+        next_view(counts, reg, scores=[np.nan, 1.0, 2.0])                 # argmax once picked the NaN: view 0
+    with pytest.raises(ValueError, match=r"one score per view, shape \(3,\)"):
+        next_view(counts, reg, scores=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"skip must hold view indices, integers in 0..2; got 3"):
+        next_view(counts, reg, skip=[3])                                  # was a bare IndexError
+    with pytest.raises(ValueError, match="skip must hold view indices"):
+        next_view(counts, reg, skip=[-1])                                 # -1 would silently skip view 2
+    with pytest.raises(ValueError, match=r"registered must have shape \(3,\)"):
+        next_view(counts, [False, True])
+    with pytest.raises(ValueError, match=r"visible_points must have shape \(V,\)"):
+        next_view([[5, 5, 5]], reg)
+
+
 def test_bad_input():
     with pytest.raises(ValueError, match="extent must be"):
         pyramid_score([[1.0, 1.0]], (0, 10))

@@ -4,7 +4,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import as_matrix, as_points
+from .._validation import as_array, as_matrix, as_points
 from ..epipolar import fundamental_8point, fundamental_ransac, sampson_distance
 from ..essential import decompose_essential, essential_from_fundamental, fundamental_from_pose
 from ..geometry import rotation_from_angle_axis, skew
@@ -102,9 +102,6 @@ def _robust_fundamental(x1, x2, rng, threshold_px, confidence, max_iter, ranking
     """F and its inliers: RANSAC on all matches, or on the best-ranked third and then re-fitted on all."""
     if ranking is None or len(x1) < 40:
         return fundamental_ransac(x1, x2, threshold_px=threshold_px, rng=rng, confidence=confidence, max_iter=max_iter)
-    ranking = np.asarray(ranking, float).reshape(-1)
-    if ranking.shape != (len(x1),):
-        raise ValueError(f"ranking must have one value per match ({len(x1)}); got shape {np.shape(ranking)}")
     best = np.argsort(ranking, kind="stable")[:max(30, len(x1) // 3)]
     F, _ = fundamental_ransac(x1[best], x2[best], threshold_px=threshold_px, rng=rng, confidence=confidence,
                               max_iter=max_iter)
@@ -189,6 +186,10 @@ def epipolar_filter(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator, t
         raise ValueError("give both K1 and K2 (calibrated filter) or neither (F only)")
     if not threshold_px > 0:
         raise ValueError(f"threshold_px must be positive; got {threshold_px}")
+    if ranking is not None:
+        ranking = as_array(ranking, "ranking", f"({len(x1)},)")
+        if ranking.shape != (len(x1),):
+            raise ValueError(f"ranking must have one value per match ({len(x1)}); got shape {ranking.shape}")
     F, inl = _robust_fundamental(x1, x2, rng, threshold_px, confidence, max_iter, ranking)
     n_ransac = int(inl.sum())
     if K1 is None:

@@ -6,6 +6,8 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validation import as_positive
+
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 """The image files :func:`labutils.match` reads (case-insensitive)."""
 
@@ -42,8 +44,7 @@ def scale_calibration(K: ArrayLike, scale: float) -> np.ndarray:
     K = np.asarray(K, float)
     if K.shape[-2:] != (3, 3) or K.ndim not in (2, 3):
         raise ValueError(f"K must have shape (3, 3) or (V, 3, 3); got {K.shape}")
-    if not np.isfinite(scale) or scale <= 0:
-        raise ValueError(f"scale must be a positive number; got {scale}")
+    scale = as_positive(scale, "scale")
     S = np.array([[scale, 0.0, (scale - 1) / 2], [0.0, scale, (scale - 1) / 2], [0.0, 0.0, 1.0]])
     return S @ K
 
@@ -58,13 +59,13 @@ def _as_pixels(x, name):
 def to_original_pixels(x: ArrayLike, scale: float) -> np.ndarray:
     """Pixels of an image scaled by ``scale`` back to the original: ``(x + 0.5) / s - 0.5``.
 
-    ``x`` has shape ``(..., 2)``; NaN (unseen) stays NaN.
+    ``x`` has shape ``(..., 2)``; NaN (unseen) stays NaN. ``scale`` must be a positive number (``ValueError``).
 
     >>> to_original_pixels([[0.0, 1.5], [np.nan, np.nan]], 0.5)
     array([[0.5, 3.5],
            [nan, nan]])
     """
-    return (_as_pixels(x, "x") + 0.5) / scale - 0.5
+    return (_as_pixels(x, "x") + 0.5) / as_positive(scale, "scale") - 0.5
 
 
 def to_working_pixels(x: ArrayLike, scale: float) -> np.ndarray:
@@ -73,7 +74,7 @@ def to_working_pixels(x: ArrayLike, scale: float) -> np.ndarray:
     >>> to_working_pixels(to_original_pixels([[3.0, 7.0]], 0.25), 0.25)
     array([[3., 7.]])
     """
-    return scale * (_as_pixels(x, "x") + 0.5) - 0.5
+    return as_positive(scale, "scale") * (_as_pixels(x, "x") + 0.5) - 0.5
 
 
 def resize_gray(image: ArrayLike, max_size: int | None = None) -> tuple[np.ndarray, float]:

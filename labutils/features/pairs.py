@@ -4,6 +4,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validation import as_count, as_rng
 from .descriptors import _as_descriptors, nearest_neighbours
 
 # ---------------------------------------------------------------------------------------------
@@ -22,7 +23,7 @@ def select_pairs(n_views: int, strategy: str = "all", window: int | None = None)
     n_views : int
     strategy : {'all', 'sequence', 'ring'}
     window : int
-        Required for 'sequence' and 'ring'.
+        Required for 'sequence' and 'ring': an integer >= 1.
 
     Returns
     -------
@@ -36,19 +37,18 @@ def select_pairs(n_views: int, strategy: str = "all", window: int | None = None)
     >>> select_pairs(5, "ring", window=1).tolist()
     [[0, 1], [0, 4], [1, 2], [2, 3], [3, 4]]
     """
-    V = int(n_views)
-    if V < 2:
-        raise ValueError(f"n_views must be at least 2; got {n_views}")
+    V = as_count(n_views, "n_views", 2)
     i, j = np.triu_indices(V, 1)
     if strategy == "all":
         keep = np.ones(i.size, bool)
     elif strategy in ("sequence", "ring"):
-        if window is None or int(window) < 1:
-            raise ValueError(f"strategy '{strategy}' needs a window >= 1; got {window}")
+        if window is None:
+            raise ValueError(f"strategy '{strategy}' needs a window >= 1; got None")
+        window = as_count(window, "window")
         gap = j - i
         if strategy == "ring":
             gap = np.minimum(gap, V - gap)
-        keep = gap <= int(window)
+        keep = gap <= window
     else:
         raise ValueError(f"strategy must be 'all', 'sequence' or 'ring'; got {strategy!r}")
     return np.column_stack([i[keep], j[keep]]).astype(np.int64)
@@ -67,24 +67,31 @@ def retrieval_pairs(descriptors: Sequence[ArrayLike], n_neighbours: int, *, rng:
     ----------
     descriptors : sequence of V (N_v, D) arrays
     n_neighbours : int
-        Per image (the shortlist holds at most ``V · n_neighbours`` pairs).
+        Per image, >= 1 (the shortlist holds at most ``V · n_neighbours`` pairs).
     rng : numpy.random.Generator
         For the sample and the k-means seeds.
     vocabulary_size : int
+        >= 1.
     sample : int
-        Descriptors drawn to learn the vocabulary.
+        Descriptors drawn to learn the vocabulary, >= ``vocabulary_size``.
 
     Returns
     -------
     pairs : (P, 2) int ndarray
         ``i < j``, sorted.
     similarity : (V, V) ndarray
-        Cosine similarity of the tf-idf histograms (1 on the diagonal).
+        Cosine similarity of the tf-idf histograms: 1 on the diagonal, except for an image whose words all
+        appear in every image (their idf is 0, so its histogram is zero): its row and column are 0.
     """
     import scipy.cluster.vq
 
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    as_rng(rng)
+    n_neighbours = as_count(n_neighbours, "n_neighbours")
+    vocabulary_size = as_count(vocabulary_size, "vocabulary_size")
+    sample = as_count(sample, "sample")
+    if sample < vocabulary_size:
+        raise ValueError(f"sample must be >= vocabulary_size = {vocabulary_size} (k-means starts from sampled "
+                         f"descriptors); got {sample}")
     D = [_as_descriptors(d, f"descriptors[{v}]") for v, d in enumerate(descriptors)]
     V = len(D)
     if V < 2:
@@ -104,6 +111,6 @@ def retrieval_pairs(descriptors: Sequence[ArrayLike], n_neighbours: int, *, rng:
     W = H / np.maximum(H.sum(1, keepdims=True), 1) * idf
     W /= np.maximum(np.linalg.norm(W, axis=1, keepdims=True), 1e-300)
     S = W @ W.T
-    order = np.argsort(-(S - 2 * np.eye(V)), axis=1)[:, :int(n_neighbours)]
+    order = np.argsort(-(S - 2 * np.eye(V)), axis=1)[:, :n_neighbours]
     pairs = {(min(a, b), max(a, b)) for a in range(V) for b in order[a].tolist()}
     return np.array(sorted(pairs), np.int64).reshape(-1, 2), S

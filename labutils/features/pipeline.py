@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import as_array, as_calibration, as_positive
+from .._validation import as_array, as_calibration, as_positive, as_rng
 from .descriptors import Features, match_descriptors
 from .geometric import epipolar_filter
 from .tracks import build_tracks, track_pixels, verify_tracks
@@ -80,8 +80,8 @@ def match_views(features: Sequence[Features], pairs: ArrayLike, *, rng: np.rando
     -------
     MatchResult
     """
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError("rng must be a numpy.random.Generator, e.g. np.random.default_rng(0)")
+    as_rng(rng)
+    features = _as_features(features)
     V = len(features)
     pairs = _as_pairs(pairs, V)
     Ks = None if K is None else as_calibration(K, "K", n_views=V, like_name="features")
@@ -119,6 +119,24 @@ def match_views(features: Sequence[Features], pairs: ArrayLike, *, rng: np.rando
         if progress is not None:
             progress(n + 1, len(pairs))
     return MatchResult(matches=matches, geometry=geometry, table=table, seconds=seconds)
+
+
+def _as_features(features):
+    """``features`` as a list of :class:`Features` (one per view), or ``ValueError`` naming the first that is not.
+
+    >>> _as_features([np.zeros((3, 2))])
+    Traceback (most recent call last):
+    ...
+    ValueError: features must be a sequence of Features (from detect_features), one per view; features[0] is a ndarray
+    """
+    if isinstance(features, Features) or not isinstance(features, Sequence):
+        raise ValueError(f"features must be a sequence of Features (from detect_features), one per view; "
+                         f"got a {type(features).__name__}")
+    for v, f in enumerate(features):
+        if not isinstance(f, Features):
+            raise ValueError(f"features must be a sequence of Features (from detect_features), one per view; "
+                             f"features[{v}] is a {type(f).__name__}")
+    return list(features)
 
 
 def _as_pairs(pairs, n_views):
@@ -187,6 +205,7 @@ def tracks_from_matches(features: Sequence[Features], result: MatchResult, *,
     """
     if verify_px is not None:
         verify_px = as_positive(verify_px, "verify_px")
+    features = _as_features(features)
     ids, n_conf = build_tracks(result.matches, [len(f) for f in features], return_conflicts=True)
     x = track_pixels(ids, [f.xy for f in features])
     n_cand = ids.shape[1] + n_conf

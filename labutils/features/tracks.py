@@ -4,7 +4,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import as_positive
+from .._validation import as_positive, as_tracks
 from ..epipolar import sampson_distance
 
 # ---------------------------------------------------------------------------------------------
@@ -161,10 +161,19 @@ def track_pixels(tracks: ArrayLike, xy: Sequence[ArrayLike]) -> np.ndarray:
     tracks = np.asarray(tracks)
     if tracks.ndim != 2 or len(xy) != tracks.shape[0]:
         raise ValueError(f"tracks must have shape (V, T) with V = len(xy) = {len(xy)}; got {tracks.shape}")
+    if tracks.size and (tracks.dtype.kind not in "iuf" or not np.array_equal(tracks, np.round(tracks))):
+        raise ValueError("tracks must hold integer feature indices (-1 where unseen)")
+    tracks = tracks.astype(int)
     out = np.full(tracks.shape + (2,), np.nan)
     for v in range(tracks.shape[0]):
         seen = tracks[v] >= 0
-        out[v, seen] = np.asarray(xy[v], float)[tracks[v, seen]]
+        xv = np.asarray(xy[v], float)
+        if xv.ndim != 2 or xv.shape[1] != 2:
+            raise ValueError(f"xy[{v}] must have shape (N, 2) (the keypoints of view {v}); got {xv.shape}")
+        if seen.any() and tracks[v, seen].max() >= len(xv):
+            raise ValueError(f"tracks[{v}] holds feature index {tracks[v, seen].max()}, but xy[{v}] has only "
+                             f"{len(xv)} keypoints (tracks and xy must come from the same features)")
+        out[v, seen] = xv[tracks[v, seen]]
     return out
 
 
@@ -195,6 +204,12 @@ def verify_tracks(x: ArrayLike, geometry: dict, threshold_px: float) -> np.ndarr
     threshold_px = as_positive(threshold_px, "threshold_px")
     seen = np.isfinite(x[..., 0])
     keep = np.ones(x.shape[1], bool)
+    V = x.shape[0]
+    for key in geometry:
+        ok = np.shape(key) == (2,) and all(isinstance(k, (int, np.integer)) and 0 <= k < V for k in key)
+        if not ok:
+            raise ValueError(f"geometry keys must be pairs of views (i, j) with 0 <= i, j < {V} (the views of x); "
+                             f"got {key!r}")
     for (i, j), F in geometry.items():
         both = np.flatnonzero(seen[i] & seen[j] & keep)
         if both.size:
@@ -223,7 +238,7 @@ def track_statistics(x: ArrayLike) -> dict:
     >>> track_statistics(x)["length_counts"].tolist()
     [0, 0, 1, 1]
     """
-    x = np.asarray(x, float)
+    x = as_tracks(x, "x")
     L = np.isfinite(x[..., 0]).sum(0)
     return dict(tracks=int(x.shape[1]), observations=int(L.sum()), mean_length=float(L.mean()) if L.size else 0.0,
                 median_length=float(np.median(L)) if L.size else 0.0, max_length=int(L.max(initial=0)),
