@@ -15,53 +15,38 @@ Conventions, used everywhere in this package and the notebooks
 - Bad input raises ``ValueError`` naming the argument, what was expected and what it got.
 
 The public names below are importable from the package (``from labutils import fundamental_8point``); each
-lives in the module of its idea and is loaded on first use, so ``import labutils`` is cheap and
-``python -m labutils.<module>`` runs a command line without importing it twice.
+lives in the stage package of its idea (``labutils.twoview``, ``labutils.sfm``, ...) and is loaded on first use, so
+``import labutils`` is cheap and ``python -m labutils.<command>`` runs a command line without importing it twice.
 
 References: Hartley & Zisserman, *Multiple View Geometry*, 2nd ed. (cited as H&Z).
 """
 import importlib
 
 _EXPORTS = {
-    "datapath": ["DataNotFoundError", "data_dirs", "find_data", "has_data"],
-    "ransac": ["ransac_iterations"],
-    "ply": ["read_ply", "write_mesh", "write_points"],
-    "scene": ["Scene", "Views", "observations"],
-    "data": ["load_dino", "load_fountain", "load_scene", "load_temple"],
-    "synthetic": ["make_scene", "perturb_cameras"],
-    "geometry": ["KRt_from_P", "P_from_KRt", "angle_axis_from_rotation", "camera_center", "dehomogeneous",
-                 "homogeneous", "left_jacobian_so3", "project", "relative_pose", "right_jacobian_so3",
-                 "rotation_from_angle_axis", "skew"],
-    "metrics": ["align_cameras", "align_similarity", "angle_between_deg", "ml_residual_bound", "pose_errors",
-                "rotation_error_deg", "up_to_sign_scale"],
-    "triangulation": ["fundamental_residual", "triangulate", "triangulate_multiview", "triangulate_optimal",
-                      "triangulate_tracks"],
-    "epipolar": ["ModelSelection", "fundamental_7point", "fundamental_8point", "fundamental_ransac",
-                 "gric_model_selection", "hartley_normalisation", "homography_dlt", "sampson_distance"],
-    "gold_standard": ["GoldStandardResult", "fundamental_gold_standard"],
-    "features": ["detect_features", "match_descriptors", "match_views", "tracks_from_matches"],
-    "essential": ["cheirality_counts", "decompose_essential", "essential_from_fundamental", "fundamental_from_pose",
-                  "pose_from_essential"],
-    "pnp": ["PnPResult", "bearings", "p3p", "p3p_bearings", "pnp_ransac", "refine_pose", "reprojection_errors"],
-    "rotation_averaging": ["RotationAveragingResult", "chordal_rotation_averaging"],
-    "reprojection": ["Rt_from_camera_params", "camera_params_from_Rt", "jacobian_sparsity", "reprojection_jacobian",
-                     "reprojection_residuals"],
-    "bal": ["read_bal", "write_bal"],
-    "lm_schur": ["SchurStep", "schur_step"],
-    "bundle": ["BundleResult", "bundle_adjust", "bundle_adjust_params"],
-    "reconstruction": ["Reconstruction", "camera_errors"],
-    "view_selection": ["choose_initial_pair", "covisibility", "pose_covariance", "pyramid_score"],
-    "pointcloud": ["PointCloud", "estimate_normals", "oriented_point_cloud"],
-    "sfm": ["bundle_from_cameras", "incremental_sfm"],
-    "uncertainty": ["aligned_pose_covariance", "gauge_basis", "predict_pose_errors"],
-    "noise_study": ["run_noise_study"],
-    "carving": ["Carving", "VoxelGrid", "background_model", "silhouette"],
-    "meshing": ["delaunay_mesh"],
-    "texturing": ["texture_vertices", "vertex_views"],
-    "lens": ["distort", "undistort_points"],
-    "zhang": ["board_homography", "intrinsics_from_homographies"],
-    "calibration": ["CalibrationResult", "calibrate_camera", "calibrate_stereo"],
-    "rectification": ["rectify_fusiello"],
+    "core": ["KRt_from_P", "P_from_KRt", "Scene", "Views", "align_cameras", "align_similarity",
+             "angle_axis_from_rotation", "angle_between_deg", "camera_center", "dehomogeneous", "homogeneous",
+             "left_jacobian_so3", "make_scene", "ml_residual_bound", "observations", "perturb_cameras",
+             "pose_errors", "project", "ransac_iterations", "relative_pose", "right_jacobian_so3",
+             "rotation_error_deg", "rotation_from_angle_axis", "skew", "up_to_sign_scale"],
+    "data": ["DataNotFoundError", "data_dirs", "find_data", "has_data", "load_dino", "load_fountain", "load_scene",
+             "load_temple", "read_bal", "read_ply", "write_bal", "write_mesh", "write_points"],
+    "twoview": ["GoldStandardResult", "ModelSelection", "cheirality_counts", "decompose_essential",
+                "essential_from_fundamental", "fundamental_7point", "fundamental_8point", "fundamental_from_pose",
+                "fundamental_gold_standard", "fundamental_ransac", "fundamental_residual", "gric_model_selection",
+                "hartley_normalisation", "homography_dlt", "pose_from_essential", "sampson_distance", "triangulate",
+                "triangulate_multiview", "triangulate_optimal", "triangulate_tracks"],
+    "match": ["detect_features", "match_descriptors", "match_views", "tracks_from_matches"],
+    "pose": ["PnPResult", "RotationAveragingResult", "bearings", "chordal_rotation_averaging", "p3p", "p3p_bearings",
+             "pnp_ransac", "pose_covariance", "refine_pose", "reprojection_errors"],
+    "bundle": ["BundleResult", "Rt_from_camera_params", "SchurStep", "aligned_pose_covariance", "bundle_adjust",
+               "bundle_adjust_params", "camera_params_from_Rt", "gauge_basis", "jacobian_sparsity",
+               "predict_pose_errors", "reprojection_jacobian", "reprojection_residuals", "schur_step"],
+    "calibrate": ["CalibrationResult", "board_homography", "calibrate_camera", "calibrate_stereo", "distort",
+                  "intrinsics_from_homographies", "rectify_fusiello", "undistort_points"],
+    "model": ["Carving", "PointCloud", "VoxelGrid", "background_model", "delaunay_mesh", "estimate_normals",
+              "oriented_point_cloud", "silhouette", "texture_vertices", "vertex_views"],
+    "sfm": ["Reconstruction", "bundle_from_cameras", "camera_errors", "choose_initial_pair", "covisibility",
+            "incremental_sfm", "pyramid_score", "run_noise_study"],
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 __all__ = sorted(_MODULE_OF)

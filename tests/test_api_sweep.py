@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 import labutils as lu
-from labutils.bal import BALProblem
-from labutils.chessboard import synthetic_board_views
-from labutils.features import Features
-from labutils.lens import project_points
-from labutils.scene import observations
+from labutils.calibrate.chessboard import synthetic_board_views
+from labutils.calibrate.lens import project_points
+from labutils.core.scene import observations
+from labutils.data.bal import BALProblem
+from labutils.match import Features
 
 S = lu.make_scene(40, 4, noise_px=0.5, rng=np.random.default_rng(0))
 T = lu.make_scene(120, 8, layout="turntable", noise_px=0.3, rng=np.random.default_rng(1))

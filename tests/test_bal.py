@@ -8,18 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labutils.bal import BALFormatError, BALProblem, format_bal, parse_bal, read_bal, write_bal
-from labutils.reprojection import reprojection_residuals
-from labutils.robust import robust_cost
+from labutils.bundle.reprojection import reprojection_residuals
+from labutils.core.robust import robust_cost
+from labutils.data.bal import BALFormatError, BALProblem, format_bal, parse_bal, read_bal, write_bal
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def small_problem(rng, noise_px=0.5, n_points=40, n_views=4):
     """A BAL problem whose cameras look down -z at points near the origin, with a perturbed start."""
-    from labutils.reprojection import camera_params_from_Rt
-    from labutils.scene import observations
-    from labutils.synthetic import make_scene
+    from labutils.bundle.reprojection import camera_params_from_Rt
+    from labutils.core.scene import observations
+    from labutils.core.synthetic import make_scene
 
     s = make_scene(n_points, n_views, noise_px=0.0, rng=rng)
     D = np.diag([1.0, -1.0, -1.0])
@@ -41,7 +41,7 @@ def test_round_trip(rng, tmp_path):
 
 
 def test_reads_the_ladybug_file():
-    from labutils.datapath import DataNotFoundError, find_data
+    from labutils.data.paths import DataNotFoundError, find_data
 
     try:
         path = find_data("bal/problem-49-7776-pre.txt")

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labutils.bench import SOLVERS, subproblem, time_per_iteration, time_solvers
-from labutils.synthetic import make_scene, perturb_cameras
+from labutils.core.synthetic import make_scene, perturb_cameras
+from labutils.tools.bench import SOLVERS, subproblem, time_per_iteration, time_solvers
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -2,19 +2,19 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from labutils.bundle import bundle_adjust, bundle_adjust_params
-from labutils.geometry import camera_center, left_jacobian_so3, rotation_from_angle_axis, skew
-from labutils.metrics import ml_residual_bound, pose_errors
-from labutils.reprojection import (
+from labutils.bundle.adjust import bundle_adjust, bundle_adjust_params
+from labutils.bundle.reprojection import (
     Rt_from_camera_params,
     camera_params_from_Rt,
     jacobian_sparsity,
     reprojection_jacobian,
     reprojection_residuals,
 )
-from labutils.robust import robust_cost
-from labutils.scene import observations
-from labutils.synthetic import make_scene
+from labutils.core.geometry import camera_center, left_jacobian_so3, rotation_from_angle_axis, skew
+from labutils.core.metrics import ml_residual_bound, pose_errors
+from labutils.core.robust import robust_cost
+from labutils.core.scene import observations
+from labutils.core.synthetic import make_scene
 
 D_BAL = np.diag([1.0, -1.0, -1.0])          # our camera (z forward, y down) -> BAL's (looks down -z, y up)
 
@@ -166,7 +166,7 @@ def test_one_fixed_camera_is_the_anchor(rng):
 
 
 def test_single_threaded_blas_restores_the_thread_count():
-    from labutils._blas import _openblas_controls, single_threaded_blas
+    from labutils.core.blas import _openblas_controls, single_threaded_blas
 
     before = [get() for get, _ in _openblas_controls()]
     with single_threaded_blas():
@@ -260,7 +260,7 @@ def test_dino_subset_solvers_agree(dino):
     tr = dino.tracks[:V]
     keep = np.isfinite(tr[..., 0]).sum(0) >= 2
     ci, pi, x = observations(tr[:, keep])
-    from labutils.triangulation import triangulate_multiview
+    from labutils.twoview.triangulation import triangulate_multiview
 
     X0 = triangulate_multiview(dino.P[:V], tr[:, keep])
     out = [bundle_adjust(dino.R[:V], dino.t[:V], X0, ci, pi, x, dino.K, solver=solver, loss="cauchy", max_iter=500)

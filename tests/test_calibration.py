@@ -1,4 +1,4 @@
-"""Calibration (labutils.calibration, chessboard, rectification, calibrate): shapes and bad input, invariants,
+"""Calibration (labutils.calibrate.camera, chessboard, rectification, calibrate): shapes and bad input, invariants,
 the Jacobian against finite differences, recovery of synthetic truth, OpenCV side by side, the real chessboard
 views, and the command line."""
 import json
@@ -13,10 +13,14 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from labutils._cli import write_all_atomically as write_atomically
-from labutils.calibrate import main
-from labutils.calibration import CalibrationProblem, _intrinsic_map, calibrate_camera, calibrate_stereo, view_influence
-from labutils.chessboard import (
+from labutils.calibrate.camera import (
+    CalibrationProblem,
+    _intrinsic_map,
+    calibrate_camera,
+    calibrate_stereo,
+    view_influence,
+)
+from labutils.calibrate.chessboard import (
     board_points,
     detect_corners,
     grid_line_residuals,
@@ -25,14 +29,22 @@ from labutils.chessboard import (
     render_board_views,
     synthetic_board_views,
 )
-from labutils.datapath import DataNotFoundError
-from labutils.formats import read_calibration
-from labutils.geometry import rotation_from_angle_axis
-from labutils.lens import distort, project_points, undistort_normalised, undistort_points
-from labutils.levenberg_marquardt import levenberg_marquardt
-from labutils.metrics import ml_residual_bound
-from labutils.rectification import rectify_fusiello, rectify_image, rectify_points, remap_grid, undistort_image
-from labutils.zhang import board_homography, intrinsics_from_homographies, pose_from_homography
+from labutils.calibrate.cli import main
+from labutils.calibrate.lens import distort, project_points, undistort_normalised, undistort_points
+from labutils.calibrate.rectification import (
+    rectify_fusiello,
+    rectify_image,
+    rectify_points,
+    remap_grid,
+    undistort_image,
+)
+from labutils.calibrate.zhang import board_homography, intrinsics_from_homographies, pose_from_homography
+from labutils.core.cli import write_all_atomically as write_atomically
+from labutils.core.geometry import rotation_from_angle_axis
+from labutils.core.lm import levenberg_marquardt
+from labutils.core.metrics import ml_residual_bound
+from labutils.data.formats import read_calibration
+from labutils.data.paths import DataNotFoundError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -570,7 +582,7 @@ def test_render_board_is_the_camera_model(rendered):
 
 def test_synthetic_stereo_views_are_consistent():
     """The notebook's fallback: both cameras see every board, corners in board order, the rig as documented."""
-    from labutils.chessboard import RIG_R, RIG_T, synthetic_stereo_views
+    from labutils.calibrate.chessboard import RIG_R, RIG_T, synthetic_stereo_views
     left_s, right_s = synthetic_stereo_views(n_views=3, rng=np.random.default_rng(3))
     for views in (left_s, right_s):
         assert len(views.images) == 3 and views.source == "synthetic"

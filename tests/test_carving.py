@@ -10,7 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from labutils.carving import (
+from labutils.data.middlebury import read_par, write_par
+from labutils.data.ply import read_model, validate_ply
+from labutils.model.carving import (
     Carving,
     VoxelGrid,
     background_model,
@@ -29,9 +31,7 @@ from labutils.carving import (
     silhouette_ious,
     surface_mesh,
 )
-from labutils.carving.synthetic import make_snowman
-from labutils.middlebury import read_par, write_par
-from labutils.ply import read_model, validate_ply
+from labutils.model.carving.synthetic import make_snowman
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -314,7 +314,7 @@ def test_colour_distance_is_the_distance_to_the_border_colours_in_opencv_lab():
 
 
 def test_temple_box_from_silhouettes():
-    from labutils.data import TEMPLE_BOX, DataNotFoundError, load_temple
+    from labutils.data.loaders import TEMPLE_BOX, DataNotFoundError, load_temple
 
     try:
         temple = load_temple()

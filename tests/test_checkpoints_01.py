@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from _checkpoints import run_cells
 
-from labutils.epipolar import fundamental_8point, hartley_normalisation
+from labutils.twoview.epipolar import fundamental_8point, hartley_normalisation
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "01_fundamental_matrix.ipynb"
 

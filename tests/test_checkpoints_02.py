@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from _checkpoints import run_cells
 
-from labutils.epipolar import fundamental_8point
+from labutils.twoview.epipolar import fundamental_8point
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "02_essential_and_pose.ipynb"
 

@@ -13,7 +13,7 @@ import matplotlib
 import pytest
 from _checkpoints import tagged_cells
 
-import labutils.pnp
+import labutils.pose.pnp
 
 matplotlib.use("Agg")
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "03_pnp.ipynb"
@@ -53,7 +53,7 @@ def _wrong_jacobian(params, X, x, K, R0):
     return J
 
 
-_right_jacobian = labutils.pnp.pose_jacobian
+_right_jacobian = labutils.pose.pnp.pose_jacobian
 
 
 def test_checkpoint_holds_for_the_library(capsys):
@@ -68,7 +68,8 @@ def test_checkpoint_catches_a_pnp_without_refinement(capsys):
 
 def test_checkpoint_catches_a_refinement_with_the_wrong_jacobian(capsys, monkeypatch):
     def wrong_jacobian(ns):
-        monkeypatch.setattr(labutils.pnp, "pose_jacobian", _wrong_jacobian)   # what refine_pose differentiates with
+        # what refine_pose differentiates with
+        monkeypatch.setattr(labutils.pose.pnp, "pose_jacobian", _wrong_jacobian)
     assert TIE in _failing_asserts(wrong_jacobian)
 
 

@@ -14,8 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 from _checkpoints import tagged_cells
 
-from labutils.geometry import left_jacobian_so3
-from labutils.reprojection import jacobian_sparsity, reprojection_jacobian, reprojection_residuals
+from labutils.bundle.reprojection import jacobian_sparsity, reprojection_jacobian, reprojection_residuals
+from labutils.core.geometry import left_jacobian_so3
 
 matplotlib.use("Agg")
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "04_bundle_adjustment.ipynb"

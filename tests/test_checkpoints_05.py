@@ -14,11 +14,11 @@ import pytest
 from _checkpoints import run_cells, tagged_cells
 
 from labutils import make_scene
-from labutils import noise_study as NS
-from labutils.reconstruction import Reconstruction
-from labutils.sfm import choose_initial_pair, incremental_sfm
-from labutils.triangulation import triangulate_multiview
-from labutils.twoview import two_view_reconstruction
+from labutils.sfm import noise_study as NS
+from labutils.sfm.incremental import choose_initial_pair, incremental_sfm
+from labutils.sfm.initial_pair import two_view_reconstruction
+from labutils.sfm.reconstruction import Reconstruction
+from labutils.twoview.triangulation import triangulate_multiview
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "05_incremental_sfm.ipynb"
 

@@ -8,7 +8,6 @@ seconds; the checks' bands are tied to the trial counts, so they stay fair at th
 """
 import functools
 import os
-import types
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +15,9 @@ import pytest
 from _checkpoints import run_cells, tagged_cells
 
 from labutils import make_scene
-from labutils import noise_study as NS
-from labutils.reprojection import camera_params_from_Rt, reprojection_jacobian
-from labutils.sfm import incremental_sfm
+from labutils.bundle.reprojection import camera_params_from_Rt, reprojection_jacobian
+from labutils.sfm import noise_study as NS
+from labutils.sfm.incremental import incremental_sfm
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "06_noise_study.ipynb"
 
@@ -28,11 +27,10 @@ run = functools.partial(run_cells, NOTEBOOK)
 
 
 def with_ns_module(ns, **replace):
-    """``ns`` with ``NS`` (labutils.noise_study) replaced by a copy whose functions ``replace`` overrides."""
-    module = types.SimpleNamespace(**{k: getattr(NS, k) for k in dir(NS) if not k.startswith("__")})
-    for name, f in replace.items():
-        setattr(module, name, f)
-    return dict(ns, NS=module)
+    """``ns`` with the notebook's names of the noise study (imported from labutils.sfm) that ``replace`` overrides."""
+    missing = [name for name in replace if name not in ns]
+    assert not missing, f"the notebook does not use {missing}"
+    return dict(ns, **replace)
 
 
 @pytest.fixture

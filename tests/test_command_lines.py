@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labutils import _cli
-from labutils.bal import BALProblem, write_bal
-from labutils.formats import write_tracks
-from labutils.synthetic import make_scene
+from labutils.core import cli as _cli
+from labutils.core.synthetic import make_scene
+from labutils.data.bal import BALProblem, write_bal
+from labutils.data.formats import write_tracks
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ["sfm", "bundle", "bench", "data", "calibrate", "carve", "match", "notebook_filter", "exercises"]
+COMMANDS = ["sfm", "bundle", "bench", "data", "calibrate", "carve", "match", "tools.notebook_filter", "exercises"]
 
 
 def run(module, *args, cwd=None, timeout=300):
@@ -57,8 +57,8 @@ def test_bad_arguments_are_one_line(module):
 def bal_problem(tmp_path):
     s = make_scene(30, 3, noise_px=0.5, rng=np.random.default_rng(0))
     D = np.diag([1.0, -1.0, -1.0])                     # our camera (z forward) -> BAL's (looks down -z, y up)
-    from labutils.reprojection import camera_params_from_Rt
-    from labutils.scene import observations
+    from labutils.bundle.reprojection import camera_params_from_Rt
+    from labutils.core.scene import observations
 
     cp = camera_params_from_Rt(D @ s.R, s.t @ D)
     ci, pi, x = observations(s.x_meas)

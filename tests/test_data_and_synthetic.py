@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 import labutils
-from labutils.datapath import find_data
-from labutils.geometry import depths, project
-from labutils.scene import nan_tracks, observations, tracks_from_observations
-from labutils.synthetic import make_scene
+from labutils.core.geometry import depths, project
+from labutils.core.scene import nan_tracks, observations, tracks_from_observations
+from labutils.core.synthetic import make_scene
+from labutils.data.paths import find_data
 
 
 def test_missing_data_names_files_and_source(monkeypatch):

@@ -2,7 +2,18 @@
 import numpy as np
 import pytest
 
-from labutils.epipolar import (
+from labutils.core.geometry import (
+    P_from_KRt,
+    dehomogeneous,
+    homogeneous,
+    project,
+    relative_pose,
+    rotation_from_angle_axis,
+    skew,
+)
+from labutils.core.metrics import angle_between_deg, rotation_error_deg
+from labutils.core.synthetic import DEFAULT_K, make_scene
+from labutils.twoview.epipolar import (
     epipole_search,
     fundamental_7point,
     fundamental_8point,
@@ -12,26 +23,15 @@ from labutils.epipolar import (
     homography_dlt,
     sampson_distance,
 )
-from labutils.essential import (
+from labutils.twoview.essential import (
     cheirality_counts,
     decompose_essential,
     essential_from_fundamental,
     fundamental_from_pose,
     pose_from_essential,
 )
-from labutils.geometry import (
-    P_from_KRt,
-    dehomogeneous,
-    homogeneous,
-    project,
-    relative_pose,
-    rotation_from_angle_axis,
-    skew,
-)
-from labutils.gold_standard import GoldStandardProblem, fundamental_gold_standard
-from labutils.metrics import angle_between_deg, rotation_error_deg
-from labutils.synthetic import DEFAULT_K, make_scene
-from labutils.triangulation import fundamental_residual, triangulate_optimal
+from labutils.twoview.gold_standard import GoldStandardProblem, fundamental_gold_standard
+from labutils.twoview.triangulation import fundamental_residual, triangulate_optimal
 
 
 def truth(s, i=0, j=1):
@@ -122,7 +122,8 @@ def test_noise_free_degenerate_raises(case, rng):
     assert fundamental_7point(x1[:7], x2[:7]) == []        # a degenerate minimal sample gives no model
 
 
-# Rates of the noisy-degeneracy test (GRIC, module docstring of labutils.epipolar): at N = 300, σ = 1 px, 82-87 %
+# Rates of the noisy-degeneracy test (GRIC, module docstring of labutils.twoview.epipolar): at N = 300, σ = 1 px, 82-87
+# %
 # of planar and pure-rotation scenes are refused (two runs of 300 scenes each). Of 20 scenes we ask for at least 12:
 # with p = 0.82 the count is Binomial(20, 0.82), mean 16.4, s.d. 1.7, and P(count < 12) ≈ 0.3 %. Given the true
 # σ, GRIC refuses 99.7-100 % of them (at N = 200 already 98-99 %), so we ask for 19 of 20.

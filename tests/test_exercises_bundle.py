@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
+from labutils.bundle.reprojection import jacobian_sparsity
+from labutils.core.geometry import left_jacobian_so3, rotation_from_angle_axis
 from labutils.exercises.ex04_bundle import check_projection_jacobian, check_schur_step, check_sparsity_mask
-from labutils.geometry import left_jacobian_so3, rotation_from_angle_axis
-from labutils.reprojection import jacobian_sparsity
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

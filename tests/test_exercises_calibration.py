@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
+from labutils.calibrate.lens import distort
+from labutils.calibrate.rectification import rectify_fusiello
+from labutils.calibrate.zhang import intrinsics_from_homographies
 from labutils.exercises.ex13_calibration import check_distort_points, check_rectifying_rotation, check_zhang_intrinsics
-from labutils.lens import distort
-from labutils.rectification import rectify_fusiello
-from labutils.zhang import intrinsics_from_homographies
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written
 
-from labutils.carving import inside_silhouette, mask_iou
 from labutils.exercises.ex11_carving import check_carve_step, check_mask_iou, check_silhouette_from_colour
+from labutils.model.carving import inside_silhouette, mask_iou
 
 
 def reference_silhouette(image, background, threshold):

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
-from labutils.essential import decompose_essential
 from labutils.exercises.ex02_essential import check_choose_pose, check_four_poses, check_triangulate_linear
-from labutils.triangulation import triangulate
+from labutils.twoview.essential import decompose_essential
+from labutils.twoview.triangulation import triangulate
 
 W = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
 P1 = np.hstack([np.eye(3), np.zeros((3, 1))])

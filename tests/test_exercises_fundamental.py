@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
-from labutils.epipolar import fundamental_8point, hartley_normalisation, sampson_distance
 from labutils.exercises.ex01_fundamental import check_eight_point, check_normalisation_matrix, check_sampson
+from labutils.twoview.epipolar import fundamental_8point, hartley_normalisation, sampson_distance
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

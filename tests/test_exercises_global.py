@@ -4,8 +4,8 @@ import pytest
 from _exercises import assert_passes, hints
 
 from labutils.exercises.ex09_global import check_centres_from_directions, check_chordal_rotations
-from labutils.global_translations import centres_from_directions
-from labutils.rotation_averaging import chordal_rotation_averaging
+from labutils.pose.global_translations import centres_from_directions
+from labutils.pose.rotation_averaging import chordal_rotation_averaging
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

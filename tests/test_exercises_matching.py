@@ -4,7 +4,7 @@ import pytest
 from _exercises import assert_stubs_not_written, hints
 
 from labutils.exercises.ex07_matching import check_build_tracks, check_mutual_check, check_ratio_test
-from labutils.features import UnionFind, build_tracks, mutual_check, ratio_test
+from labutils.match import UnionFind, build_tracks, mutual_check, ratio_test
 
 # --- the ratio test ------------------------------------------------------------------------------
 

@@ -10,12 +10,12 @@ from labutils.exercises.ex10_model import (
     check_orient_normal,
     check_pca_normal,
 )
-from labutils.pointcloud import orient_normals
-from labutils.texturing import most_frontal_view
+from labutils.model.pointcloud import orient_normals
+from labutils.model.texturing import most_frontal_view
 
 
 def _library_orient(X, n, C, seen):
-    """labutils.pointcloud.orient_normals for one point, cameras given by their centres (R = I, t = -C)."""
+    """labutils.model.orient_normals for one point, cameras given by their centres (R = I, t = -C)."""
     return orient_normals(X[None], n[None], np.stack([np.eye(3)] * len(C)), -C, seen[:, None])[0]
 
 

@@ -11,7 +11,7 @@ from labutils.exercises.ex06_noise import (
     cramer_rao_reference,
     nees_reference,
 )
-from labutils.noise_study import nees, pose_covariance
+from labutils.sfm.noise_study import nees, pose_covariance
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
+from labutils.core.ransac import ransac
 from labutils.exercises.ex03_pnp import check_adaptive_ransac, check_pose_from_depths
-from labutils.ransac import ransac
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

@@ -3,14 +3,14 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
+from labutils.core.geometry import camera_center
 from labutils.exercises.ex05_sfm import (
     accept_points_reference,
     check_accept_points,
     check_choose_next_view,
     next_view_reference,
 )
-from labutils.geometry import camera_center
-from labutils.sfm import next_view
+from labutils.sfm.incremental import next_view
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

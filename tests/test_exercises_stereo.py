@@ -10,7 +10,7 @@ from labutils.exercises.ex12_stereo import (
     check_zncc_patch,
     reference_points_from_disparity,
 )
-from labutils.stereo import left_right_check, zncc
+from labutils.model.stereo import left_right_check, zncc
 
 
 @pytest.mark.parametrize("check, func", [(check_zncc_patch, zncc), (check_left_right_consistent, left_right_check),

@@ -4,7 +4,7 @@ import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
 from labutils.exercises.ex08_views import check_pose_covariance, check_pyramid_score
-from labutils.view_selection import pose_covariance, pyramid_score
+from labutils.sfm.view_selection import pose_covariance, pyramid_score
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 

@@ -1,4 +1,4 @@
-"""labutils.features and python -m labutils.match: shapes and bad input, invariants, recovery on rendered images with
+"""labutils.match and python -m labutils.match: shapes and bad input, invariants, recovery on rendered images with
 exact correspondences, OpenCV as the reference, the real data, and the command line."""
 import os
 import stat
@@ -10,15 +10,15 @@ import cv2
 import numpy as np
 import pytest
 
-from labutils import features as ft
-from labutils.epipolar import sampson_distance
-from labutils.essential import fundamental_from_pose
-from labutils.formats import read_tracks
-from labutils.geometry import relative_pose
-from labutils.metrics import rotation_error_deg
-from labutils.sfm import bundle_from_cameras, incremental_sfm
-from labutils.synthetic import make_scene
-from labutils.synthetic_images import render_corner
+from labutils import match as ft
+from labutils.core.geometry import relative_pose
+from labutils.core.metrics import rotation_error_deg
+from labutils.core.synthetic import make_scene
+from labutils.data.formats import read_tracks
+from labutils.match.synthetic import render_corner
+from labutils.sfm.incremental import bundle_from_cameras, incremental_sfm
+from labutils.twoview.epipolar import sampson_distance
+from labutils.twoview.essential import fundamental_from_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,7 +99,7 @@ def test_images_pairs_and_thresholds_bad_input():
 
 def test_rng_checks_name_what_they_got():
     """One check (_validation.as_rng) for every function of the matching chapter that draws random numbers."""
-    from labutils.synthetic_images import blob_texture
+    from labutils.match.synthetic import blob_texture
 
     f = [ft.Features(np.zeros((0, 2)), np.zeros((0, 8), np.float32))] * 2
     calls = [lambda r: ft.match_views(f, [[0, 1]], rng=r), lambda r: blob_texture(16, rng=r),
@@ -557,8 +557,8 @@ def test_cli_rejects_bad_input(image_dir, tmp_path, setup, message):
 
 def test_cli_write_failure_leaves_nothing(image_dir, tmp_path, monkeypatch, capsys):
     """A full disk while writing: one error line, status 2, and the temporary file is gone."""
-    import labutils.match as cli
-    from labutils import _cli
+    import labutils.match.cli as cli
+    from labutils.core import cli as _cli
 
     d, _ = image_dir
 

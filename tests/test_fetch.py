@@ -24,9 +24,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from labutils import datasets as D
-from labutils import fetch as F
-from labutils.datapath import data_dirs
+from labutils.data import fetch as F
+from labutils.data import registry as D
+from labutils.data.paths import data_dirs
 
 NAMES = ["dino", "fountain-P11", "templeRing", "chessboard", "bal"]
 PROJECT = Path(__file__).resolve().parents[1]
@@ -136,8 +136,9 @@ def run_cli(*args, data, url=None, module="labutils.data"):
                           timeout=300)
 
 
-# `labutils/__init__.py` imports `labutils.data`, so `python -m labutils.data` makes runpy print this warning
-# before our code runs (known; see test_data_entry_point_has_no_runpy_warning). The error-line checks look past it.
+# runpy prints this warning when `python -m labutils.data` finds the module imported already (it did while the command
+# was a module that labutils/__init__.py imported; test_data_entry_point_has_no_runpy_warning holds that it no longer
+# is). The error-line checks look past it.
 RUNPY_WARNING = re.compile(r"^<frozen runpy>:\d+: RuntimeWarning: 'labutils\.data' found in sys\.modules")
 
 

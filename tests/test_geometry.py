@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from labutils.geometry import (
+from labutils.core.geometry import (
     KRt_from_P,
     P_from_KRt,
     angle_axis_from_rotation,

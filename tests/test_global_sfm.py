@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labutils.formats import write_tracks
-from labutils.geometry import P_from_KRt, project, relative_pose
-from labutils.global_sfm import ViewGraph, candidate_pairs, global_sfm, view_graph
-from labutils.metrics import rotation_error_deg
-from labutils.reconstruction import camera_errors
-from labutils.sfm import bundle_from_cameras, incremental_sfm
-from labutils.synthetic import make_scene
+from labutils.core.geometry import P_from_KRt, project, relative_pose
+from labutils.core.metrics import rotation_error_deg
+from labutils.core.synthetic import make_scene
+from labutils.data.formats import write_tracks
+from labutils.sfm.global_sfm import ViewGraph, candidate_pairs, global_sfm, view_graph
+from labutils.sfm.incremental import bundle_from_cameras, incremental_sfm
+from labutils.sfm.reconstruction import camera_errors
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -149,7 +149,7 @@ def _umask():
 
 
 def _record(d, K):
-    from labutils.reconstruction import Reconstruction
+    from labutils.sfm.reconstruction import Reconstruction
     V = len(d["cameras"])
     return Reconstruction(R=np.array([c["R"] for c in d["cameras"]]), t=np.array([c["t"] for c in d["cameras"]]),
                           registered=np.ones(V, bool), X=np.zeros((0, 3)), inliers=np.zeros((V, 0), bool), order=[],

@@ -2,16 +2,16 @@
 import numpy as np
 import pytest
 
-from labutils.geometry import P_from_KRt, project, relative_pose, rotation_from_angle_axis
-from labutils.global_translations import (
+from labutils.core.geometry import P_from_KRt, project, relative_pose, rotation_from_angle_axis
+from labutils.core.metrics import align_similarity
+from labutils.core.synthetic import make_scene
+from labutils.pose.global_translations import (
     centres_from_directions,
     centres_from_points,
     pair_directions,
     robust_centres_from_points,
     world_rays,
 )
-from labutils.metrics import align_similarity
-from labutils.synthetic import make_scene
 
 
 def similar(C_est, C_true):

@@ -69,7 +69,7 @@ def test_notebook_is_stripped_and_checked(path):
     name = f"{path} ({WHERE})"
     code = [c for c in nb["cells"] if c["cell_type"] == "code"]
     assert all(not c.get("outputs") and c.get("execution_count") is None for c in code), \
-        f"{name} has stored outputs: strip them before committing (python -m labutils.notebook_filter makes " \
+        f"{name} has stored outputs: strip them before committing (python -m labutils.tools.notebook_filter makes " \
         "git do it)"
     assert any(re.search(r"^\s*assert\b", "".join(c["source"]), re.M) for c in code), \
         f"{name} has no assert checkpoint"
@@ -80,7 +80,7 @@ def test_notebook_is_stripped_and_checked(path):
 
 
 def _filter_settings():
-    spec = importlib.util.spec_from_file_location("notebook_filter", ROOT / "labutils" / "notebook_filter.py")
+    spec = importlib.util.spec_from_file_location("notebook_filter", ROOT / "labutils" / "tools" / "notebook_filter.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -88,8 +88,8 @@ def _filter_settings():
 
 @pytest.mark.parametrize("path", CODE_NOTEBOOKS, ids=lambda p: p.split("/")[-1])
 def test_notebook_is_what_the_git_filter_stores(path):
-    """Byte for byte what nbstripout (as python -m labutils.notebook_filter sets it up) would store: then a notebook
-    run and saved in JupyterLab shows no change in ``git diff``, and ``git add`` changes nothing committed."""
+    """Byte for byte what nbstripout (as python -m labutils.tools.notebook_filter sets it up) would store: then a
+    notebook run and saved in JupyterLab shows no change in ``git diff``, and ``git add`` changes nothing committed."""
     nbstripout = pytest.importorskip("nbstripout", reason="nbstripout is not installed (pip install -r "
                                                           "environment.txt)")
     nbformat = pytest.importorskip("nbformat")

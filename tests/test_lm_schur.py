@@ -3,10 +3,10 @@ and bad input."""
 import numpy as np
 import pytest
 
-from labutils.lm_schur import lm_schur, schur_step
-from labutils.reprojection import camera_params_from_Rt, reprojection_jacobian, reprojection_residuals
-from labutils.scene import observations
-from labutils.synthetic import make_scene
+from labutils.bundle.reprojection import camera_params_from_Rt, reprojection_jacobian, reprojection_residuals
+from labutils.bundle.schur import lm_schur, schur_step
+from labutils.core.scene import observations
+from labutils.core.synthetic import make_scene
 
 
 @pytest.fixture(scope="module")

@@ -1,10 +1,10 @@
-"""labutils.meshing: bad input, the boundary of tetrahedra (closed, outward), Delaunay meshes of spheres (closed,
+"""labutils.model.meshing: bad input, the boundary of tetrahedra (closed, outward), Delaunay meshes of spheres (closed,
 outward, bridges carved away)."""
 import numpy as np
 import pytest
 
-from labutils.carving import mesh_volume
-from labutils.meshing import boundary_faces, delaunay_mesh, face_normals, vertex_normals
+from labutils.model.carving import mesh_volume
+from labutils.model.meshing import boundary_faces, delaunay_mesh, face_normals, vertex_normals
 
 
 def sphere_points(n, centre=(0.0, 0.0, 0.0), radius=1.0):
@@ -38,7 +38,7 @@ def edges_shared_twice(F):
     (lambda: delaunay_mesh(np.column_stack([np.random.default_rng(0).random((20, 2)), np.zeros(20)])), "one plane"),
     (lambda: delaunay_mesh(sphere_points(50), max_edge=1e-3), "no tetrahedron is left"),
     (lambda: delaunay_mesh(sphere_points(50).T), "X must have shape (N, 3)"),
-    # mesh_volume checks its faces like every mesh function (labutils._validation.as_mesh): F - 1 used to wrap -1 to
+    # mesh_volume checks its faces like every mesh function (labutils.core.validation.as_mesh): F - 1 used to wrap -1 to
     # the last vertex and give a plausible wrong volume; lists, floats and NaN gave IndexError / TypeError / nan
     (lambda: mesh_volume(*TETRA[:1], TETRA[1] - 1), "faces hold vertex indices 0..3; got -1..2"),
     (lambda: mesh_volume(TETRA[0].tolist(), TETRA[1].tolist()[:3] + [[1, 2, 4]]), "vertex indices 0..3; got 0..4"),

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from labutils.geometry import rotation_from_angle_axis
-from labutils.metrics import align_similarity, angle_between_deg, pose_errors, rotation_error_deg
+from labutils.core.geometry import rotation_from_angle_axis
+from labutils.core.metrics import align_similarity, angle_between_deg, pose_errors, rotation_error_deg
 
 
 def test_rotation_error_small_and_large():

@@ -1,5 +1,5 @@
-"""The 3D plot helpers of labutils.plotting refuse arrays of the wrong shape instead of reshaping them into garbage
-points or cameras."""
+"""The 3D plot helpers of labutils.plotting.common refuse arrays of the wrong shape instead of reshaping them into
+garbage points or cameras."""
 import matplotlib
 
 matplotlib.use("Agg")
@@ -7,7 +7,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from labutils.plotting import (  # noqa: E402
+from labutils.plotting.common import (  # noqa: E402
     camera_frusta,
     plot_cameras,
     plot_cameras_and_points,

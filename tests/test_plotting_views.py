@@ -5,7 +5,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from labutils.plotting_views import (  # noqa: E402
+from labutils.plotting.views import (  # noqa: E402
     plot_error_growth,
     plot_errors_per_view,
     plot_pyramid,

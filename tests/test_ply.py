@@ -5,8 +5,8 @@ import stat
 import numpy as np
 import pytest
 
-from labutils.formats import ply_text
-from labutils.ply import (
+from labutils.data.formats import ply_text
+from labutils.data.ply import (
     PLY_TYPES,
     parse_header,
     read_model,

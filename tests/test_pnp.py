@@ -2,9 +2,11 @@ import cv2
 import numpy as np
 import pytest
 
-from labutils.geometry import angle_axis_from_rotation, rotation_from_angle_axis
-from labutils.metrics import ml_residual_bound, rotation_error_deg
-from labutils.pnp import (
+from labutils.core.geometry import angle_axis_from_rotation, rotation_from_angle_axis
+from labutils.core.metrics import ml_residual_bound, rotation_error_deg
+from labutils.core.ransac import ransac_iterations
+from labutils.core.synthetic import make_scene
+from labutils.pose.pnp import (
     bearings,
     p3p,
     p3p_bearings,
@@ -14,8 +16,6 @@ from labutils.pnp import (
     refine_pose,
     reprojection_errors,
 )
-from labutils.ransac import ransac_iterations
-from labutils.synthetic import make_scene
 
 K_SKEW = np.array([[900.0, -25.0, 330.0], [0.0, 850.0, 250.0], [0.0, 0.0, 1.0]])
 

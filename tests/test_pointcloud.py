@@ -1,11 +1,12 @@
-"""labutils.pointcloud: shapes and bad input, invariants, normals and colours against exact truth (a plane, the
+"""labutils.model.pointcloud: shapes and bad input, invariants, normals and colours against exact truth (a plane, the
 synthetic turntable's bumpy object, the textured snowman), OpenCV's bilinear sampling, PLY round trips, the dinosaur."""
 import cv2
 import numpy as np
 import pytest
 
-from labutils.ply import read_model, validate_ply
-from labutils.pointcloud import (
+from labutils.core.synthetic import make_scene
+from labutils.data.ply import read_model, validate_ply
+from labutils.model.pointcloud import (
     PointCloud,
     estimate_normals,
     facing_fractions,
@@ -15,9 +16,8 @@ from labutils.pointcloud import (
     point_colors,
     sample_image,
 )
-from labutils.synthetic import make_scene
-from labutils.textured_scene import make_textured_scene
-from labutils.triangulation import triangulate_multiview
+from labutils.model.textured_scene import make_textured_scene
+from labutils.twoview.triangulation import triangulate_multiview
 
 
 def blob_normals(X):

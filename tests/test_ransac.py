@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from labutils.ransac import ransac, ransac_iterations
+from labutils.core.ransac import ransac, ransac_iterations
 
 
 def line_problem(rng, n=200, outlier_ratio=0.4):

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from labutils.geometry import rotation_from_angle_axis
-from labutils.metrics import rotation_error_deg
-from labutils.rotation_averaging import (
+from labutils.core.geometry import rotation_from_angle_axis
+from labutils.core.metrics import rotation_error_deg
+from labutils.pose.rotation_averaging import (
     aligned_rotation_errors_deg,
     as_view_graph,
     chordal_rotation_averaging,

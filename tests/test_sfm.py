@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labutils.formats import read_calibration, read_result_json, read_tracks, write_tracks
-from labutils.geometry import P_from_KRt, project, rotation_from_angle_axis
-from labutils.metrics import ml_residual_bound
-from labutils.ply import read_model
-from labutils.reconstruction import Reconstruction, camera_errors
-from labutils.sfm import bundle_from_cameras, choose_initial_pair, covisibility, incremental_sfm
-from labutils.synthetic import make_scene
-from labutils.triangulation import triangulate_tracks
+from labutils.core.geometry import P_from_KRt, project, rotation_from_angle_axis
+from labutils.core.metrics import ml_residual_bound
+from labutils.core.synthetic import make_scene
+from labutils.data.formats import read_calibration, read_result_json, read_tracks, write_tracks
+from labutils.data.ply import read_model
+from labutils.sfm.incremental import bundle_from_cameras, choose_initial_pair, covisibility, incremental_sfm
+from labutils.sfm.reconstruction import Reconstruction, camera_errors
+from labutils.twoview.triangulation import triangulate_tracks
 
 ROOT = Path(__file__).resolve().parents[1]
 

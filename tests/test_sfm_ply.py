@@ -10,11 +10,11 @@ import cv2
 import numpy as np
 import pytest
 
-from labutils.formats import write_tracks
-from labutils.ply import read_model, validate_ply
-from labutils.pointcloud import facing_fractions
-from labutils.reconstruction import Reconstruction, align_reconstruction
-from labutils.textured_scene import make_textured_scene
+from labutils.data.formats import write_tracks
+from labutils.data.ply import read_model, validate_ply
+from labutils.model.pointcloud import facing_fractions
+from labutils.model.textured_scene import make_textured_scene
+from labutils.sfm.reconstruction import Reconstruction, align_reconstruction
 
 ROOT = Path(__file__).resolve().parents[1]
 

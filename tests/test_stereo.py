@@ -1,5 +1,5 @@
-"""Dense stereo (labutils.stereo): shapes and bad input, invariants, recovery on scenes with exact truth, OpenCV as the
-reference (box filter, SGBM), and the real temple and dinosaur where the data is present."""
+"""Dense stereo (labutils.model.stereo): shapes and bad input, invariants, recovery on scenes with exact truth, OpenCV
+as the reference (box filter, SGBM), and the real temple and dinosaur where the data is present."""
 import inspect
 
 import cv2
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from labutils.stereo import (
+from labutils.core.synthetic import look_at
+from labutils.model.stereo import (
     DepthMap,
     RectifiedPair,
     box_mean,
@@ -27,9 +28,8 @@ from labutils.stereo import (
     zncc,
     zncc_volume,
 )
-from labutils.stereo.synthetic import make_layered_pair, make_textured_spheres
-from labutils.synthetic import look_at
-from labutils.triangulation import triangulate
+from labutils.model.stereo.synthetic import make_layered_pair, make_textured_spheres
+from labutils.twoview.triangulation import triangulate
 
 WINDOW = 7
 
@@ -436,7 +436,7 @@ def test_synthetic_spheres_know_their_depths():
 def test_temple_pair_agrees_with_sgbm():
     """A temple pair at half size: where our checked disparity and SGBM's both exist, over 85 % agree within one
     pixel (measured: 93 %); the rest sit at depth edges and on the dark cloth."""
-    from labutils.data import TEMPLE_BOX, DataNotFoundError, load_temple
+    from labutils.data.loaders import TEMPLE_BOX, DataNotFoundError, load_temple
     try:
         temple = load_temple()
     except DataNotFoundError as exc:

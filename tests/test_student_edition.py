@@ -45,7 +45,7 @@ import nbformat
 import pytest
 from IPython.core.inputtransformer2 import TransformerManager
 
-from labutils import _cli
+from labutils.core import cli as _cli
 from labutils.exercises.__main__ import main
 from labutils.exercises.release import DELIMITERS, student_edition, student_preprocessors
 

@@ -1,15 +1,15 @@
-"""labutils.texturing: bad input, the depth buffer against exact ray–plane depths and the carving module's scan
+"""labutils.model.texturing: bad input, the depth buffer against exact ray–plane depths and the carving module's scan
 conversion, visibility with an occluder, the most frontal view, and textures against the textured snowman's exact
 colours."""
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from labutils.carving import mesh_volume, render_silhouette
-from labutils.meshing import delaunay_mesh
-from labutils.synthetic import look_at
-from labutils.textured_scene import make_textured_scene
-from labutils.texturing import (
+from labutils.core.synthetic import look_at
+from labutils.model.carving import mesh_volume, render_silhouette
+from labutils.model.meshing import delaunay_mesh
+from labutils.model.textured_scene import make_textured_scene
+from labutils.model.texturing import (
     edge_contrast,
     held_out_error,
     most_frontal_view,

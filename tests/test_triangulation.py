@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from labutils.synthetic import make_scene
-from labutils.triangulation import triangulate, triangulate_multiview
+from labutils.core.synthetic import make_scene
+from labutils.twoview.triangulation import triangulate, triangulate_multiview
 
 
 def test_two_view_recovers_truth_noise_free(rng):

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from labutils.geometry import relative_pose, skew
-from labutils.synthetic import make_scene
-from labutils.triangulation import fundamental_residual, triangulate, triangulate_optimal
+from labutils.core.geometry import relative_pose, skew
+from labutils.core.synthetic import make_scene
+from labutils.twoview.triangulation import fundamental_residual, triangulate, triangulate_optimal
 
 
 def true_F(s, i=0, j=1):
@@ -80,7 +80,7 @@ def test_never_farther_than_other_corrections(rng):
     x1, x2, idx = s.pair(0, 1)
     d_opt = sq_dist(x1, x2, *triangulate_optimal(F, x1, x2))
     X = triangulate(s.P[0], s.P[1], x1, x2)                     # linear triangulation, then reproject
-    from labutils.geometry import project
+    from labutils.core.geometry import project
     d_dlt = sq_dist(x1, x2, project(s.P[0], X), project(s.P[1], X))
     d_true = sq_dist(x1, x2, *s.pair(0, 1, which="true")[:2])
     assert np.all(d_opt <= d_dlt + 1e-9) and np.all(d_opt <= d_true + 1e-9)

@@ -2,13 +2,13 @@
 import numpy as np
 import pytest
 
-from labutils import noise_study as NS
-from labutils import reprojection as bundle
-from labutils import uncertainty as U
-from labutils.geometry import angle_axis_from_rotation, camera_center
-from labutils.metrics import align_cameras, pose_errors, rotation_error_deg
-from labutils.scene import observations
-from labutils.synthetic import make_scene
+from labutils.bundle import reprojection as bundle
+from labutils.bundle import uncertainty as U
+from labutils.core.geometry import angle_axis_from_rotation, camera_center
+from labutils.core.metrics import align_cameras, pose_errors, rotation_error_deg
+from labutils.core.scene import observations
+from labutils.core.synthetic import make_scene
+from labutils.sfm import noise_study as NS
 
 
 @pytest.fixture(scope="module")
@@ -294,7 +294,7 @@ def test_common_noise_scales_one_pattern(small):
 
 def test_sfm_reaches_the_ml_optimum_and_beats_no_ba(small):
     """The full pipeline on σ = 0.5 px lands where BA from the truth does; without BA it drifts; σ = 0 is exact."""
-    from labutils.sfm import incremental_sfm
+    from labutils.sfm.incremental import incremental_sfm
 
     s, _, _ = small
     rng = np.random.default_rng(7)

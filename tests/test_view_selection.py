@@ -3,12 +3,12 @@ they stand in for, and the strategies inside incremental SfM."""
 import numpy as np
 import pytest
 
-from labutils.geometry import P_from_KRt, angle_axis_from_rotation, project, rotation_from_angle_axis
-from labutils.pnp import refine_pose
-from labutils.reconstruction import camera_errors
-from labutils.sfm import incremental_sfm
-from labutils.synthetic import make_scene
-from labutils.view_selection import (
+from labutils.core.geometry import P_from_KRt, angle_axis_from_rotation, project, rotation_from_angle_axis
+from labutils.core.synthetic import make_scene
+from labutils.pose.pnp import refine_pose
+from labutils.sfm.incremental import incremental_sfm
+from labutils.sfm.reconstruction import camera_errors
+from labutils.sfm.view_selection import (
     as_scores,
     as_strategy,
     most_points_scores,

@@ -22,120 +22,84 @@ At least one written question per notebook is a markdown cell with ``solution: t
 ``points`` (manually graded), whose model answer sits between ``### BEGIN SOLUTION`` / ``### END SOLUTION``.
 Section headings say **(core)** or **(optional)**; the introduction gives a time estimate for the core.
 
-This module holds the runner the checks share (:func:`run_checks`); each notebook's checks live in a module
-of its own (``labutils.exercises.ex01_fundamental`` ...), so that a wrong answer can be tested against its
-hint by the unit tests, without running the notebook.
+The runner the checks share is :mod:`~labutils.exercises.runner` (:func:`run_checks`); each notebook's checks
+live in a module of its own (``labutils.exercises.ex01_fundamental`` ...), so that a wrong answer can be tested against
+its hint by the unit tests, without running the notebook.
 """
-from dataclasses import dataclass, field
+from .ex01_fundamental import (
+    check_eight_point,
+    check_normalisation_matrix,
+    check_sampson,
+)
+from .ex02_essential import (
+    check_choose_pose,
+    check_four_poses,
+    check_triangulate_linear,
+)
+from .ex03_pnp import (
+    check_adaptive_ransac,
+    check_pose_from_depths,
+    p3p_ransac_inliers,
+)
+from .ex04_bundle import (
+    check_projection_jacobian,
+    check_schur_step,
+    check_sparsity_mask,
+)
+from .ex05_sfm import (
+    accept_points_reference,
+    check_accept_points,
+    check_choose_next_view,
+    next_view_reference,
+)
+from .ex06_noise import (
+    check_cramer_rao_pose,
+    check_nees,
+    cramer_rao_reference,
+    nees_reference,
+)
+from .ex07_matching import (
+    check_build_tracks,
+    check_mutual_check,
+    check_ratio_test,
+)
+from .ex08_views import (
+    check_pose_covariance,
+    check_pyramid_score,
+)
+from .ex09_global import (
+    check_centres_from_directions,
+    check_chordal_rotations,
+)
+from .ex10_model import (
+    check_most_frontal_view,
+    check_orient_normal,
+    check_pca_normal,
+)
+from .ex11_carving import (
+    check_carve_step,
+    check_mask_iou,
+    check_silhouette_from_colour,
+)
+from .ex12_stereo import (
+    check_left_right_consistent,
+    check_points_from_disparity,
+    check_zncc_patch,
+)
+from .ex13_calibration import (
+    check_distort_points,
+    check_rectifying_rotation,
+    check_zhang_intrinsics,
+)
+from .runner import CaseResult, CheckReport, run_checks
 
-__all__ = ["CaseResult", "CheckReport", "run_checks", "up_to_sign_scale"]
-
-
-@dataclass
-class CaseResult:
-    """One case of a self-check: its description, whether it passed, and the hint when it did not."""
-
-    name: str
-    passed: bool
-    hint: str = ""
-
-
-@dataclass
-class CheckReport:
-    """What :func:`run_checks` found: one :class:`CaseResult` per case.
-
-    ``passed`` is True only when every case passed; ``written`` is False while the function is still the
-    student edition's stub (it raised ``NotImplementedError``).
-    """
-
-    exercise: str
-    cases: list = field(default_factory=list)
-    written: bool = True
-
-    @property
-    def passed(self):
-        return self.written and bool(self.cases) and all(c.passed for c in self.cases)
-
-    @property
-    def hints(self):
-        """The hints of the cases that failed (empty when all passed)."""
-        return [c.hint for c in self.cases if not c.passed]
-
-    def text(self):
-        """The report as printed: a heading, then one line per case."""
-        if not self.written:
-            return (f"self-check · {self.exercise}: not written yet — write the function's body (see its "
-                    "docstring), run its cell, then this one. Meanwhile the notebook goes on with the library's "
-                    "version.")
-        lines = [f"self-check · {self.exercise}: "
-                 + ("all cases pass" if self.passed else f"{len(self.hints)} of {len(self.cases)} cases fail")]
-        for c in self.cases:
-            hint = "" if c.passed else f"\n        hint: {c.hint}"
-            lines.append(f"  {'pass' if c.passed else 'FAIL'}  {c.name}{hint}")
-        return "\n".join(lines)
-
-
-def run_checks(exercise, func, cases, *, verbose=True):
-    """Run the cases of one exercise on a student's function and print pass or a hint for each.
-
-    Parameters
-    ----------
-    exercise : str
-        The exercise's name (the function the student writes).
-    func : callable
-        The student's function.
-    cases : sequence of (str, callable)
-        ``(description, case)``; ``case(func)`` returns None when the function passes, else a hint: a sentence
-        naming the likely mistake ("your F has rank 3: enforce rank 2 after the SVD"). An exception raised by
-        ``func`` inside a case becomes that case's hint (with its type and message); ``NotImplementedError``
-        means the stub is not written yet, and no further case is run.
-    verbose : bool
-        Print the report (:meth:`CheckReport.text`).
-
-    Returns
-    -------
-    CheckReport
-
-    Examples
-    --------
-    >>> def double(x):
-    ...     return x + x
-    >>> cases = [("2 -> 4", lambda f: None if f(2) == 4 else f"f(2) = {f(2)}, expected 4"),
-    ...          ("0 -> 0", lambda f: None if f(0) == 0 else "f(0) should be 0")]
-    >>> run_checks("double", double, cases, verbose=False).passed
-    True
-    >>> report = run_checks("double", lambda x: x * 3, cases)
-    self-check · double: 1 of 2 cases fail
-      FAIL  2 -> 4
-            hint: f(2) = 6, expected 4
-      pass  0 -> 0
-    """
-    report = CheckReport(exercise)
-    for name, case in cases:
-        try:
-            hint = case(func)
-        except NotImplementedError:
-            report.written = False
-            break
-        except Exception as exc:       # the student's code raised: that is the hint
-            hint = f"raised {type(exc).__name__}: {exc}"
-        report.cases.append(CaseResult(name, hint is None, "" if hint is None else str(hint)))
-    if verbose:
-        print(report.text())
-    return report
-
-
-def up_to_sign_scale(A, B):
-    """Largest entry of ``A/‖A‖ ∓ B/‖B‖`` for the better sign: 0 when A and B agree up to scale and sign.
-
-    F, E, H and homogeneous vectors are defined up to scale (and sign); this is the one way the workbook
-    compares them.
-
-    >>> up_to_sign_scale([[1.0, 2.0]], [[-2.0, -4.0]])
-    0.0
-    """
-    import numpy as np
-
-    A, B = np.asarray(A, float), np.asarray(B, float)
-    A, B = A / np.linalg.norm(A), B / np.linalg.norm(B)
-    return float(min(np.abs(A - B).max(), np.abs(A + B).max()))
+__all__ = ["CaseResult", "CheckReport", "run_checks", "check_eight_point", "check_normalisation_matrix",
+           "check_sampson", "check_choose_pose", "check_four_poses", "check_triangulate_linear",
+           "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "check_projection_jacobian",
+           "check_schur_step", "check_sparsity_mask", "accept_points_reference", "check_accept_points",
+           "check_choose_next_view", "next_view_reference", "check_cramer_rao_pose", "check_nees",
+           "cramer_rao_reference", "nees_reference", "check_build_tracks", "check_mutual_check", "check_ratio_test",
+           "check_pose_covariance", "check_pyramid_score", "check_centres_from_directions", "check_chordal_rotations",
+           "check_most_frontal_view", "check_orient_normal", "check_pca_normal", "check_carve_step", "check_mask_iou",
+           "check_silhouette_from_colour", "check_left_right_consistent", "check_points_from_disparity",
+           "check_zncc_patch", "check_distort_points", "check_rectifying_rotation", "check_zhang_intrinsics"]

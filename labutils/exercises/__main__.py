@@ -15,8 +15,8 @@ Progress goes to stderr, the summary to stdout.
 import sys
 from pathlib import Path
 
-from .. import _cli
-from ..datapath import PROJECT_ROOT
+from ..core import cli as _cli
+from ..data.paths import PROJECT_ROOT
 from .release import release_files
 
 NOTEBOOKS = PROJECT_ROOT / "notebooks"

@@ -7,12 +7,18 @@ coordinates, the squared distance, one image's error only ...).
 """
 import numpy as np
 
-from ..epipolar import design_matrix, fundamental_8point, hartley_normalisation, sampson_distance, transform_points
-from ..essential import fundamental_from_pose
-from ..geometry import relative_pose
-from ..metrics import up_to_sign_scale
-from ..synthetic import make_scene
-from . import run_checks
+from ..core.geometry import relative_pose
+from ..core.metrics import up_to_sign_scale
+from ..core.synthetic import make_scene
+from ..twoview.epipolar import (
+    design_matrix,
+    fundamental_8point,
+    hartley_normalisation,
+    sampson_distance,
+    transform_points,
+)
+from ..twoview.essential import fundamental_from_pose
+from .runner import run_checks
 
 
 def _pair(seed, noise_px, n=40, layout="general"):

@@ -7,11 +7,11 @@ only camera 1 checked for depth, the homogeneous point not divided by its last c
 """
 import numpy as np
 
-from ..essential import decompose_essential
-from ..geometry import relative_pose, rotation_from_angle_axis, skew
-from ..synthetic import make_scene
-from ..triangulation import triangulate
-from . import run_checks
+from ..core.geometry import relative_pose, rotation_from_angle_axis, skew
+from ..core.synthetic import make_scene
+from ..twoview.essential import decompose_essential
+from ..twoview.triangulation import triangulate
+from .runner import run_checks
 
 W = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 

@@ -7,11 +7,11 @@ edges paired in the wrong order, a loop that is not adaptive, only the first P3P
 """
 import numpy as np
 
-from ..geometry import angle_axis_from_rotation, rotation_from_angle_axis
-from ..pnp import bearings, p3p, p3p_bearings, reprojection_errors
-from ..ransac import ransac_iterations
-from ..synthetic import DEFAULT_K, look_at, make_scene
-from . import run_checks
+from ..core.geometry import angle_axis_from_rotation, rotation_from_angle_axis
+from ..core.ransac import ransac_iterations
+from ..core.synthetic import DEFAULT_K, look_at, make_scene
+from ..pose.pnp import bearings, p3p, p3p_bearings, reprojection_errors
+from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
 # exercise 1: the pose from two congruent triangles
@@ -234,7 +234,7 @@ def check_adaptive_ransac(adaptive_ransac, verbose=True):
 
     Examples
     --------
-    >>> from labutils.ransac import ransac
+    >>> from labutils.core.ransac import ransac
     >>> check_adaptive_ransac(ransac, verbose=False).passed
     True
     """
@@ -321,7 +321,7 @@ def p3p_ransac_inliers(adaptive_ransac, X, x, K, threshold_px, *, seed=1):
 
     Examples
     --------
-    >>> from labutils.ransac import ransac
+    >>> from labutils.core.ransac import ransac
     >>> s = make_scene(40, 2, noise_px=0.0, rng=np.random.default_rng(0))
     >>> bool(p3p_ransac_inliers(ransac, s.X, s.x_true[0], s.K, 2.0).all())
     True

@@ -8,18 +8,18 @@ the point block missing from the mask, Levenberg's μI instead of Marquardt's μ
 import numpy as np
 import scipy.sparse as sp
 
-from ..geometry import left_jacobian_so3, rotation_from_angle_axis
-from ..lm_schur import schur_step as _library_schur_step
-from ..reprojection import (
+from ..bundle.reprojection import (
     camera_params_from_Rt,
     jacobian_sparsity,
     project_observations,
     reprojection_jacobian,
     reprojection_residuals,
 )
-from ..scene import observations
-from ..synthetic import DEFAULT_K, make_scene
-from . import run_checks
+from ..bundle.schur import schur_step as _library_schur_step
+from ..core.geometry import left_jacobian_so3, rotation_from_angle_axis
+from ..core.scene import observations
+from ..core.synthetic import DEFAULT_K, make_scene
+from .runner import run_checks
 
 K_SKEW = np.array([[1500.0, -60.0, 350.0], [0.0, 1480.0, 300.0], [0.0, 0.0, 1.0]])
 
@@ -335,7 +335,7 @@ def check_schur_step(schur_step, verbose=True):
     """Self-check of ``schur_step(J, r, n_cam_cols, mu) -> (delta_c, delta_p)``: one damped Gauss–Newton step
     ``(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr`` by the Schur complement, on a dense J.
 
-    Cases: a small scene with light damping (the library's :func:`labutils.lm_schur.schur_step` gives the same
+    Cases: a small scene with light damping (the library's :func:`labutils.bundle.schur_step` gives the same
     step), strong damping, and a scene where some points are seen by two cameras only.
 
     Examples
@@ -356,7 +356,7 @@ def check_schur_step(schur_step, verbose=True):
                 lib = _library_schur_step(cp, X, ci, pi, x, K, mu=mu)
                 dc = np.asarray(out[0], float).ravel()
                 if np.abs(dc - lib.delta_c.ravel()).max() > 1e-6 * np.abs(lib.delta_c).max():
-                    return "δc differs from labutils.lm_schur.schur_step's"
+                    return "δc differs from labutils.bundle.schur.schur_step's"
             return hint
         return run
 

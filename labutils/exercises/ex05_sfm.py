@@ -8,11 +8,11 @@ far off while the mean is small, a narrow angle ...), so the track a wrong answe
 """
 import numpy as np
 
-from ..geometry import camera_center
-from ..reconstruction import masked_reprojection_errors
-from ..synthetic import look_at, make_scene
-from ..triangulation import ray_angles_deg, triangulate_multiview
-from . import run_checks
+from ..core.geometry import camera_center
+from ..core.synthetic import look_at, make_scene
+from ..sfm.reconstruction import masked_reprojection_errors
+from ..twoview.triangulation import ray_angles_deg, triangulate_multiview
+from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
 # exercise 1: the next view

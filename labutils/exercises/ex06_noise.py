@@ -7,10 +7,10 @@ block instead of the rotation block, radians, Σ instead of Σ⁻¹, the diagona
 """
 import numpy as np
 
-from ..geometry import rotation_from_angle_axis
-from ..noise_study import pose_covariance
-from ..pnp import pose_jacobian
-from . import run_checks
+from ..core.geometry import rotation_from_angle_axis
+from ..pose.pnp import pose_jacobian
+from ..sfm.noise_study import pose_covariance
+from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
 # exercise 1: the Cramér–Rao prediction for one camera
@@ -98,7 +98,7 @@ def _diagnose_crb(out, J, sigma):
 def check_cramer_rao_pose(cramer_rao_pose, verbose=True):
     """Self-check of ``cramer_rao_pose(J, sigma) -> (cov, rot_rms_deg)`` (H&Z Sec. 5.2.2, backward propagation).
 
-    Cases: a camera at σ = 1 px against :func:`labutils.noise_study.pose_covariance`, the same at σ = 0.5 and 2 px
+    Cases: a camera at σ = 1 px against :func:`labutils.sfm.noise_study.pose_covariance`, the same at σ = 0.5 and 2 px
     (the covariance scales as σ²), and a camera seeing a small patch (strongly correlated rotation and translation).
 
     Examples
@@ -111,7 +111,7 @@ def check_cramer_rao_pose(cramer_rao_pose, verbose=True):
         out = f(J.copy(), 1.0)
         hint = _diagnose_crb(out, J, 1.0)
         if hint is None and not _close(np.asarray(out[0]), pose_covariance(X, K, R, t, 1.0)):
-            return "cov differs from labutils.noise_study.pose_covariance on the same camera"
+            return "cov differs from labutils.sfm.noise_study.pose_covariance on the same camera"
         return hint
 
     def scaling(f):

@@ -3,8 +3,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..features import build_tracks, mutual_check, ratio_test
-from . import CheckReport, run_checks
+from ..match import build_tracks, mutual_check, ratio_test
+from .runner import CheckReport, run_checks
 
 # ---------------------------------------------------------------------------------------------
 # The ratio test

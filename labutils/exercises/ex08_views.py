@@ -7,10 +7,10 @@ perturbed on the wrong side ...).
 """
 import numpy as np
 
-from ..geometry import rotation_from_angle_axis
-from ..pnp import pose_jacobian
-from ..view_selection import pose_covariance, pyramid_score
-from . import run_checks
+from ..core.geometry import rotation_from_angle_axis
+from ..pose.pnp import pose_jacobian
+from ..sfm.view_selection import pose_covariance, pyramid_score
+from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
 # exercise 1: the visibility-pyramid score

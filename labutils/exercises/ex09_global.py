@@ -7,11 +7,11 @@ lifted, the centres mirrored, the translations used without turning them into th
 """
 import numpy as np
 
-from ..geometry import rotation_from_angle_axis
-from ..global_translations import centres_from_directions
-from ..metrics import rotation_error_deg
-from ..rotation_averaging import chordal_rotation_averaging, project_to_so3
-from . import run_checks
+from ..core.geometry import rotation_from_angle_axis
+from ..core.metrics import rotation_error_deg
+from ..pose.global_translations import centres_from_directions
+from ..pose.rotation_averaging import chordal_rotation_averaging, project_to_so3
+from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
 # exercise 1: chordal rotation averaging

@@ -2,8 +2,8 @@
 visibility, and the most frontal view of a vertex."""
 import numpy as np
 
-from ..texturing import most_frontal_view
-from . import run_checks
+from ..model.texturing import most_frontal_view
+from .runner import run_checks
 
 __all__ = ["check_pca_normal", "check_orient_normal", "check_most_frontal_view"]
 

@@ -1,9 +1,9 @@
 """Self-checks of notebook 11 (space carving): a silhouette from colour, the carving test of one view, the IoU."""
 import numpy as np
 
-from ..carving import inside_silhouette, mask_iou
-from ..carving.synthetic import make_snowman
-from . import run_checks
+from ..model.carving import inside_silhouette, mask_iou
+from ..model.carving.synthetic import make_snowman
+from .runner import run_checks
 
 __all__ = ["check_silhouette_from_colour", "check_carve_step", "check_mask_iou"]
 

@@ -6,10 +6,10 @@ truncating instead of rounding, the principal point forgotten ...).
 """
 import numpy as np
 
-from ..stereo import left_right_check, zncc
-from ..stereo.synthetic import make_layered_pair
-from ..triangulation import triangulate
-from . import run_checks
+from ..model.stereo import left_right_check, zncc
+from ..model.stereo.synthetic import make_layered_pair
+from ..twoview.triangulation import triangulate
+from .runner import run_checks
 
 __all__ = ["check_zncc_patch", "check_left_right_consistent", "check_points_from_disparity"]
 

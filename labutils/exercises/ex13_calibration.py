@@ -6,11 +6,11 @@ swapped, the baseline pointing the wrong way ...).
 """
 import numpy as np
 
-from ..geometry import rotation_from_angle_axis
-from ..lens import distort
-from ..rectification import rectify_fusiello
-from ..zhang import intrinsics_from_homographies
-from . import run_checks
+from ..calibrate.lens import distort
+from ..calibrate.rectification import rectify_fusiello
+from ..calibrate.zhang import intrinsics_from_homographies
+from ..core.geometry import rotation_from_angle_axis
+from .runner import run_checks
 
 K_SKEW = np.array([[820.0, 1.5, 330.0], [0.0, 800.0, 250.0], [0.0, 0.0, 1.0]])
 

@@ -443,7 +443,7 @@ def release_files(notebooks, outdir, *, force=False, labutils=None, progress=Non
         ``README.md`` or ``requirements.txt`` that a student edition did not write).
     labutils : str, optional
         The pip requirement students install ``labutils`` by (see :func:`student_requirements`).
-    progress : labutils._cli.Progress, optional
+    progress : labutils.core.cli.Progress, optional
         Stepped once per notebook.
 
     Returns

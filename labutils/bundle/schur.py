@@ -1,0 +1,340 @@
+"""Our bundle-adjustment solver: Levenberg–Marquardt on the normal equations with the Schur complement.
+
+Madsen, Nielsen & Tingleff 2004, Alg. 3.16 (Marquardt's diagonal scaling, Nielsen's damping update); the 3×3
+point blocks are eliminated by the Schur complement (Triggs et al. 2000, Sec. 6.1; H&Z Sec. A6.3) and the
+reduced camera system is solved by dense Cholesky. Robust losses by iteratively reweighted least squares, then
+the loss's second-order curvature near the optimum (:mod:`labutils.core.robust`). Called through
+:func:`labutils.bundle.bundle_adjust` (``solver='lm-schur'``), which checks the input and fixes the gauge.
+:func:`schur_step` computes one damped step of the same solver on its own (notebook 04 derives it in cells and
+compares).
+"""
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+from numpy.typing import ArrayLike
+
+from ..core.robust import CURVATURE_FLOOR, SECOND_ORDER_AFTER, rho
+from ..core.validation import as_positive
+from .reprojection import check_problem, project_observations
+
+
+def _inv_sym3(A):
+    """Inverse of a stack of symmetric 3×3 matrices, in closed form (adjugate / determinant)."""
+    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    d, e, f = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
+    c00 = d * f - e * e
+    c01 = c * e - b * f
+    c02 = b * e - c * d
+    c11 = a * f - c * c
+    c12 = b * c - a * e
+    c22 = a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    inv = np.stack([np.stack([c00, c01, c02], -1), np.stack([c01, c11, c12], -1),
+                    np.stack([c02, c12, c22], -1)], axis=1)
+    return inv / det[:, None, None]
+
+
+class _SchurStructure:
+    """Index bookkeeping for the reduced camera system, computed once per problem."""
+
+    CHUNK = 8192
+
+    def __init__(self, ci, pi, V, M):
+        n = ci.shape[0]
+        obs = np.arange(n)
+        self.A_cam = sp.csr_matrix((np.ones(n), (ci, obs)), shape=(V, n))      # sums observations per camera
+        self.A_pt = sp.csr_matrix((np.ones(n), (pi, obs)), shape=(M, n))       # ... per point
+        # pairs of observations of the same point, o1 <= o2 (the reduced system is symmetric)
+        order = np.argsort(pi, kind="stable")
+        counts = np.bincount(pi, minlength=M)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        pos = np.empty(n, np.int64)
+        pos[order] = np.arange(n)                                 # rank of each observation in its point's list
+        rank = pos - starts[pi]
+        n_partners = counts[pi] - rank                            # partners at or after itself
+        o1 = np.repeat(obs, n_partners)
+        first = np.repeat(pos, n_partners)
+        o2 = order[first + (np.arange(o1.size) - np.repeat(np.cumsum(n_partners) - n_partners, n_partners))]
+        off = o1 != o2                                            # the diagonal pairs are the observations
+        o1, o2 = o1[off], o2[off]
+        blk = ci[o1] * V + ci[o2]
+        # chunks of pairs small enough to stay in cache; per chunk an indicator matrix that sums
+        # each pair's k×k block into its (camera, camera) block of the reduced system
+        self.chunks = []
+        for s in range(0, o1.size, self.CHUNK):
+            sl = slice(s, s + self.CHUNK)
+            m = o1[sl].size
+            A = sp.csr_matrix((np.ones(m), (blk[sl], np.arange(m))), shape=(V * V, m))
+            self.chunks.append((o1[sl], o2[sl], A))
+        self.A_diag = sp.csr_matrix((np.ones(n), (ci * (V + 1), obs)), shape=(V * V, n))
+        self.n_pairs = o1.size
+        self.V = V
+
+
+def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter, tol, verbose):
+    """Levenberg–Marquardt with the Schur complement; see :func:`bundle_adjust`. Returns a dict."""
+    V, k = cp0.shape
+    M = X0.shape[0]
+    st = _SchurStructure(ci, pi, V, M)
+    mask_c = free_cam[ci].astype(float)[:, None, :]                 # zero the frozen columns
+    mask_p = free_pt[pi].astype(float)[:, None, None]
+    frozen_c, frozen_p = ~free_cam, ~free_pt
+
+    def cost_of(cp, X):
+        r = project_observations(cp, X, ci, pi, Ks) - x
+        return 0.5 * f_scale ** 2 * rho((r / f_scale) ** 2, loss)[0].sum(), r
+
+    cp, X = cp0.copy(), X0.copy()
+    F, _ = cost_of(cp, X)
+    mu, nu = None, 2.0
+    n_iter, n_eval, status = 0, 1, "maximum number of iterations reached"
+    success = False
+    need_jac = True
+    second_order = False
+    x_norm = np.sqrt((cp ** 2).sum() + (X ** 2).sum())
+    while n_iter < max_iter:
+        if need_jac:
+            u, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
+            r = u - x
+            n_iter += 1
+            Jc, Jp = Jc * mask_c, Jp * mask_p
+            if loss != "linear":
+                # Robust loss: the gradient of 0.5 f² ρ(r²/f²) is ρ' r J. Far from the optimum we weight the
+                # rows by sqrt(ρ') (IRLS: curvature ρ' JᵀJ, a convex model whatever the residuals). IRLS
+                # overestimates the curvature of residuals beyond the scale, so its steps there are too short
+                # and it converges only linearly; once the cost decrease slows (below 1e-3 relative) we switch
+                # to the exact second-order curvature of the loss, ρ' + 2 z ρ'' (Triggs et al. Sec. 4.3; what
+                # scipy uses from the start), floored at 0.01 ρ' to keep the model convex.
+                z = (r / f_scale) ** 2
+                _, d1, d2 = rho(z, loss)
+                hw = np.sqrt(np.maximum(d1 + 2 * z * d2, CURVATURE_FLOOR * d1) if second_order else d1)
+                r = r * d1 / hw
+                Jc, Jp = Jc * hw[:, :, None], Jp * hw[:, :, None]
+            U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, r)
+            # frozen parameters: identity rows, zero gradient (their step is exactly 0)
+            ic = np.nonzero(frozen_c)
+            U[ic[0], ic[1], ic[1]] = 1.0
+            Vp[frozen_p] = np.eye(3)
+            Dc = np.clip(np.diagonal(U, axis1=1, axis2=2), 1e-6, 1e32)      # Marquardt scaling
+            Dp = np.clip(np.diagonal(Vp, axis1=1, axis2=2), 1e-6, 1e32)
+            g_inf = max(np.abs(gc).max(initial=0.0), np.abs(gp).max(initial=0.0))
+            if mu is None:
+                mu = 1e-4
+            if g_inf <= 1e-14 * max(1.0, F):
+                status, success = "gradient is zero to machine precision", True
+                break
+            need_jac = False
+        try:
+            dc, dp, _, _ = _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c, frozen_p)
+        except np.linalg.LinAlgError:
+            mu *= nu
+            nu *= 2
+            continue
+        h_norm = np.sqrt((dc ** 2).sum() + (dp ** 2).sum())
+        xtol = 1e-2 * tol                                          # Ceres: 1e-8 with function tolerance 1e-6
+        if h_norm <= xtol * (x_norm + xtol):
+            status, success = "step size below xtol", True
+            break
+        pred = 0.5 * (mu * ((Dc * dc ** 2).sum() + (Dp * dp ** 2).sum()) - (gc * dc).sum() - (gp * dp).sum())
+        cp_new, X_new = cp + dc, X + dp
+        F_new, _ = cost_of(cp_new, X_new)
+        n_eval += 1
+        gain = (F - F_new) / pred if pred > 0 else -1.0
+        if verbose:
+            if n_eval == 2:
+                print(f"{'iter':>4} {'cost':>13} {'cost_change':>12} {'|gradient|':>11} {'|step|':>10} "
+                      f"{'gain':>7} {'damping':>9}", file=sys.stderr)
+            print(f"{n_iter:4d} {F:13.6e} {F - F_new:12.4e} {g_inf:11.3e} {h_norm:10.3e} {gain:7.3f} {mu:9.2e}"
+                  + ("" if gain > 0 and np.isfinite(F_new) else "  (rejected)"), file=sys.stderr, flush=True)
+        if gain > 0 and np.isfinite(F_new):
+            dF = F - F_new
+            cp, X, F = cp_new, X_new, F_new
+            x_norm = np.sqrt((cp ** 2).sum() + (X ** 2).sum())
+            mu *= max(1 / 3, 1 - (2 * gain - 1) ** 3)
+            nu = 2.0
+            need_jac = True
+            if dF <= SECOND_ORDER_AFTER * F_new:
+                second_order = True
+            if dF <= tol * F_new or F_new == 0.0:
+                status, success = "relative cost reduction below ftol", True
+                break
+        else:
+            mu *= nu
+            nu *= 2
+            if mu > 1e32:
+                status, success = "damping exceeded 1e32: no further reduction possible", True
+                break
+    return dict(cp=cp, X=X, n_iter=n_iter, n_eval=n_eval, success=success, message=status)
+
+
+def _normal_blocks(st, Jc, Jp, r):
+    """The blocks of ``JᵀJ`` and ``Jᵀr`` from per-observation Jacobian blocks ``Jc (n, 2, k)``, ``Jp (n, 2, 3)``.
+
+    Returns ``U (V, k, k)`` (camera blocks), ``Vp (M, 3, 3)`` (point blocks), ``W (n, k, 3)`` (one camera-point
+    block per observation), ``gc (V, k)`` and ``gp (M, 3)`` (the gradient ``Jᵀr``).
+    """
+    n, _, k = Jc.shape
+    JcT = np.swapaxes(Jc, 1, 2)
+    U = (st.A_cam @ (JcT @ Jc).reshape(-1, k * k)).reshape(-1, k, k)            # camera blocks
+    Vp = (st.A_pt @ (np.swapaxes(Jp, 1, 2) @ Jp).reshape(-1, 9)).reshape(-1, 3, 3)   # point blocks
+    W = JcT @ Jp                                                # (n, k, 3) camera-point blocks
+    gc = st.A_cam @ np.einsum("nai,na->ni", Jc, r)              # (V, k)
+    gp = st.A_pt @ np.einsum("nai,na->ni", Jp, r)               # (M, 3)
+    return U, Vp, W, gc, gp
+
+
+def _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c=None, frozen_p=None):
+    """One damped Gauss–Newton step by the Schur complement: ``(dc (V, k), dp (M, 3), S, rhs)``.
+
+    Solves ``(JᵀJ + μ D) δ = -Jᵀr`` with ``D = diag(Dc, Dp)``: the 3×3 point blocks inverted in closed form,
+    the reduced camera system ``S δc = rhs`` by dense Cholesky (raises ``LinAlgError`` when S is not positive
+    definite), then back-substitution ``δp = V⁻¹(-gp - Wᵀ δc)``. Frozen parameters get a zero step.
+    """
+    V, k = gc.shape
+    Ua = U.copy()
+    Ua[:, np.arange(k), np.arange(k)] += mu * Dc
+    Va = Vp.copy()
+    Va[:, np.arange(3), np.arange(3)] += mu * Dp
+    Vinv = _inv_sym3(Va)
+    Y = W @ Vinv[pi]                                            # W V⁻¹ per observation, (n, k, 3)
+    S = -_reduced_camera_blocks(st, Y, W)
+    S += _block_diag_dense(Ua)
+    rhs = -(gc - st.A_cam @ np.einsum("nij,nj->ni", Y, gp[pi])).ravel()
+    dc = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S, lower=True, check_finite=False), rhs,
+                                check_finite=False).reshape(V, k)
+    if frozen_c is not None:
+        dc[frozen_c] = 0.0
+    dp = np.einsum("mij,mj->mi", Vinv, -gp - st.A_pt @ np.einsum("nij,ni->nj", W, dc[ci]))
+    if frozen_p is not None:
+        dp[frozen_p] = 0.0
+    return dc, dp, S, rhs
+
+
+@dataclass
+class SchurStep:
+    """One damped step of LM-Schur, with the blocks it was made of (what :func:`schur_step` returns).
+
+    Attributes
+    ----------
+    U : (V, k, k) ndarray
+        Camera blocks of ``JᵀJ`` (undamped).
+    V : (M, 3, 3) ndarray
+        Point blocks of ``JᵀJ`` (undamped).
+    W : (n_obs, k, 3) ndarray
+        The camera-point blocks ``Jcᵀ Jp``, one per observation (block ``(c, p)`` of ``JᵀJ`` sums those of the
+        observations of point ``p`` by camera ``c``).
+    g_c : (V, k) ndarray
+    g_p : (M, 3) ndarray
+        The gradient ``Jᵀr`` split into its camera and point parts.
+    S : (V k, V k) ndarray
+        The damped reduced camera matrix ``U* - W V*⁻¹ Wᵀ`` (``*``: with ``μ D`` added to the diagonal).
+    rhs : (V k,) ndarray
+        ``-(g_c - W V*⁻¹ g_p)``.
+    delta_c : (V, k) ndarray
+    delta_p : (M, 3) ndarray
+        The step: ``S δc = rhs``, then ``δp = V*⁻¹ (-g_p - Wᵀ δc)``.
+    mu : float
+    """
+
+    U: np.ndarray = field(repr=False)
+    V: np.ndarray = field(repr=False)
+    W: np.ndarray = field(repr=False)
+    g_c: np.ndarray = field(repr=False)
+    g_p: np.ndarray = field(repr=False)
+    S: np.ndarray = field(repr=False)
+    rhs: np.ndarray = field(repr=False)
+    delta_c: np.ndarray = field(repr=False)
+    delta_p: np.ndarray = field(repr=False)
+    mu: float
+
+
+def schur_step(camera_params: ArrayLike, points_3d: ArrayLike, camera_indices: ArrayLike, point_indices: ArrayLike,
+               points_2d: ArrayLike, K: ArrayLike, *, mu: float) -> SchurStep:
+    """One damped Gauss–Newton step of :func:`lm_schur`, by the Schur complement (H&Z Sec. A6.3, Alg. A6.4).
+
+    The step solves ``(JᵀJ + μ D) δ = -Jᵀr`` for the plain squared error, with Marquardt's scaling
+    ``D = diag(JᵀJ)`` (each entry clipped to ``[1e-6, 1e32]``), exactly as an iteration of the solver behind
+    ``bundle_adjust(..., solver='lm-schur')`` does (every parameter free, no gauge: the damping keeps ``S``
+    positive definite). It exists to show, and to test, one step of the solver on its own.
+
+    Parameters
+    ----------
+    camera_params, points_3d, camera_indices, point_indices, points_2d, K
+        As in :func:`labutils.bundle.reprojection_residuals`.
+    mu : float
+        The damping, > 0.
+
+    Returns
+    -------
+    SchurStep
+        The blocks ``U, V, W``, the gradient, ``S``, the right-hand side and the step ``delta_c (V, k)``,
+        ``delta_p (M, 3)``.
+
+    Raises
+    ------
+    ValueError
+        Bad input (see :func:`labutils.bundle.reprojection_residuals`), ``mu`` not positive, or a reduced
+        camera matrix that is not positive definite.
+
+    Examples
+    --------
+    The step equals the direct solution of the damped normal equations:
+
+    >>> from labutils.bundle.reprojection import reprojection_jacobian, reprojection_residuals
+    >>> cp = np.array([[0., 0, 0, 0, 0, 5], [0, 0.1, 0, -1, 0, 5]]); X = np.random.default_rng(0).normal(size=(6, 3))
+    >>> ci, pi = np.repeat([0, 1], 6), np.tile(np.arange(6), 2); K = np.diag([500., 500, 1])
+    >>> x = np.random.default_rng(1).normal(size=(12, 2))
+    >>> step = schur_step(cp, X, ci, pi, x, K, mu=1e-3)
+    >>> J = reprojection_jacobian(cp, X, ci, pi, K).toarray(); A = J.T @ J
+    >>> g = J.T @ reprojection_residuals(cp, X, ci, pi, x, K)
+    >>> delta = np.linalg.solve(A + 1e-3 * np.diag(np.diag(A)), -g)
+    >>> bool(np.allclose(np.r_[step.delta_c.ravel(), step.delta_p.ravel()], delta, rtol=1e-8, atol=1e-10))
+    True
+    """
+    cp, X, ci, pi, x, Ks = check_problem(camera_params, points_3d, camera_indices, point_indices, points_2d, K)
+    mu = as_positive(mu, "mu")
+    V, M = cp.shape[0], X.shape[0]
+    st = _SchurStructure(ci, pi, V, M)
+    u, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
+    U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, u - x)
+    Dc = np.clip(np.diagonal(U, axis1=1, axis2=2), 1e-6, 1e32)
+    Dp = np.clip(np.diagonal(Vp, axis1=1, axis2=2), 1e-6, 1e32)
+    try:
+        dc, dp, S, rhs = _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"the damped reduced camera matrix is not positive definite at mu = {mu:g} "
+                         "(a camera or point without enough observations?)") from None
+    return SchurStep(U=U, V=Vp, W=W, g_c=gc, g_p=gp, S=S, rhs=rhs, delta_c=dc, delta_p=dp, mu=mu)
+
+
+def _reduced_camera_blocks(st, Y, W):
+    """``Σ_p W_p V_p⁻¹ W_pᵀ`` as a dense ``(V k, V k)`` matrix, from per-observation ``Y = W V⁻¹`` and ``W``.
+
+    Block (c1, c2) sums ``Y_o1 W_o2ᵀ`` over the pairs of observations (o1 by c1, o2 by c2) of the same
+    point: the diagonal pairs (o1 = o2) once, the others (o1 < o2) once and mirrored by symmetry.
+    """
+    n, k, _ = W.shape
+    V = st.V
+    Y2 = Y.reshape(n, 3 * k)
+    Wt2 = np.ascontiguousarray(np.swapaxes(W, 1, 2)).reshape(n, 3 * k)
+    G = np.zeros((V * V, k * k))
+    for o1, o2, A in st.chunks:
+        T = np.take(Y2, o1, axis=0).reshape(-1, k, 3) @ np.take(Wt2, o2, axis=0).reshape(-1, 3, k)
+        G += A @ T.reshape(-1, k * k)
+    Gd = st.A_diag @ (Y @ np.swapaxes(W, 1, 2)).reshape(n, k * k)
+
+    def dense(B):
+        return B.reshape(V, V, k, k).transpose(0, 2, 1, 3).reshape(V * k, V * k)
+
+    G = dense(G)
+    return G + G.T + dense(Gd)
+
+
+def _block_diag_dense(blocks):
+    V, k, _ = blocks.shape
+    out = np.zeros((V, k, V, k))
+    out[np.arange(V), :, np.arange(V), :] = blocks
+    return out.reshape(V * k, V * k)

@@ -1,0 +1,7 @@
+"""``python -m labutils.calibrate "photos/*.jpg" --board 9x6 --square 25 --out camera.json``: see
+:mod:`labutils.calibrate.cli`."""
+import sys
+
+from .cli import main
+
+sys.exit(main())

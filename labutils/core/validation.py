@@ -1,0 +1,394 @@
+"""Input checks shared by every module: clear ``ValueError`` messages that name the argument, what was expected
+and what it got. Nothing here reshapes silently: a ``(3, V)`` array where ``(V, 3)`` is expected is an error."""
+import numbers
+
+import numpy as np
+
+
+def as_array(x, name, expected):
+    """``x`` as a float array (any shape), or ``ValueError`` naming ``name`` and the ``expected`` shape when it is not
+    numeric (a string, a ragged list).
+
+    >>> as_array([[1, 2], [3]], "x", "(N, 2)")
+    Traceback (most recent call last):
+    ...
+    ValueError: x must be a numeric array of shape (N, 2): ...
+    """
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array of shape {expected}: {exc}") from None
+    return a
+
+
+_as_float_array = as_array
+
+
+def as_points(x, name, dim=2, min_n=1, like=None):
+    """Return ``x`` as a float ``(N, dim)`` array, or raise ``ValueError`` naming the problem.
+
+    Parameters
+    ----------
+    x : array_like
+        Points as rows.
+    name : str
+        The argument's name, used in the error message.
+    dim : int
+        Columns expected (2 for pixels, 3 for world points).
+    min_n : int
+        Fewest rows accepted.
+    like : ndarray or (ndarray, str), optional
+        When given, ``x`` must have as many rows as ``like`` (an array, or an array and its argument's name, which
+        the message then names).
+
+    Examples
+    --------
+    >>> as_points([[1, 2], [3, 4]], "x1").shape
+    (2, 2)
+    >>> as_points([[1, 2, 3]], "x1")
+    Traceback (most recent call last):
+    ...
+    ValueError: x1 must have shape (N, 2) (points as rows); got shape (1, 3)
+    """
+    a = _as_float_array(x, name, f"(N, {dim})")
+    if a.ndim != 2 or a.shape[1] != dim:
+        hint = " — transposed? points are rows" if a.ndim == 2 and a.shape[0] == dim else ""
+        raise ValueError(f"{name} must have shape (N, {dim}) (points as rows); got shape {a.shape}{hint}")
+    if like is not None:
+        other, other_name = like if isinstance(like, tuple) else (like, "the other point set")
+        if a.shape[0] != np.shape(other)[0]:
+            raise ValueError(f"{name} has {a.shape[0]} points but {other_name} has {np.shape(other)[0]}: "
+                             "correspondences must pair up row by row")
+    if a.shape[0] < min_n:
+        raise ValueError(f"{name} has {a.shape[0]} points; at least {min_n} are needed")
+    if not np.all(np.isfinite(a)):
+        bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+        raise ValueError(f"{name} has non-finite coordinates (NaN or inf) in rows {bad[:5].tolist()}"
+                         + (" ..." if bad.size > 5 else ""))
+    return a
+
+
+def as_matrix(M, name, shape):
+    """Return ``M`` as a finite float array of exactly ``shape``, or raise ``ValueError``.
+
+    Examples
+    --------
+    >>> as_matrix(np.eye(3), "K", (3, 3)).dtype
+    dtype('float64')
+    >>> as_matrix([1.0, np.nan, 0.0], "t", (3,))
+    Traceback (most recent call last):
+    ...
+    ValueError: t has non-finite entries (NaN or inf)
+    """
+    a = _as_float_array(M, name, tuple(shape))
+    if a.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}; got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} has non-finite entries (NaN or inf)")
+    return a
+
+
+def as_vector3(t, name="t"):
+    """A finite ``(3,)`` vector; a ``(3, 1)`` or ``(1, 3)`` array is refused (say ``t.ravel()`` if you mean it).
+
+    >>> as_vector3([1, 2, 3]).shape
+    (3,)
+    """
+    return as_matrix(t, name, (3,))
+
+
+def as_rotation(R, name="R", tol=1e-6):
+    """Return ``R`` as a (3, 3) rotation (orthonormal, det +1), or raise ``ValueError``.
+
+    >>> as_rotation(2 * np.eye(3))
+    Traceback (most recent call last):
+    ...
+    ValueError: R is not a rotation matrix (orthonormal with det +1): |R Rᵀ - I| = 3, det R = 8
+    """
+    return as_rotations(as_matrix(R, name, (3, 3))[None], name, tol)[0]
+
+
+def as_rotations(R, name="R", tol=1e-6, n=None, like_name=None):
+    """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one.
+
+    >>> as_rotations(np.stack([np.eye(3), -np.eye(3)]))
+    Traceback (most recent call last):
+    ...
+    ValueError: R[1] is not a rotation matrix (orthonormal with det +1): |R Rᵀ - I| = 0, det R = -1
+    """
+    expected = "(V, 3, 3)" if n is None else f"({n}, 3, 3)"
+    a = _as_float_array(R, name, expected)
+    if a.ndim != 3 or a.shape[1:] != (3, 3) or (n is not None and a.shape[0] != n):
+        match = f" to match {like_name}" if like_name and n is not None else ""
+        raise ValueError(f"{name} must have shape {expected}{match}; got shape {a.shape}")
+    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=(1, 2)))
+    if bad.size:
+        who = f"{name}[{bad[0]}]" if len(a) > 1 or n is not None else name
+        raise ValueError(f"{who} has non-finite entries (NaN or inf)")
+    err = np.abs(a @ np.swapaxes(a, 1, 2) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(a)
+    bad = np.flatnonzero((err > tol) | (det < 0))
+    if bad.size:
+        k = int(bad[0])
+        who = f"{name}[{k}]" if len(a) > 1 or n is not None else name
+        raise ValueError(f"{who} is not a rotation matrix (orthonormal with det +1): "
+                         f"|R Rᵀ - I| = {err[k]:.3g}, det R = {det[k]:.3g}")
+    return a
+
+
+def as_translations(t, name="t", n=None, like_name=None):
+    """Return ``t`` as a finite ``(V, 3)`` array (rows are the cameras' translations), or raise ``ValueError``.
+
+    A ``(3, V)`` array (one column per camera) is refused with a hint, unless V = 3 makes the two readings
+    indistinguishable: then the rows are read as the translations, as documented everywhere.
+
+    >>> as_translations(np.zeros((3, 5)), n=5)
+    Traceback (most recent call last):
+    ...
+    ValueError: t must have shape (5, 3) (one translation per row); got shape (3, 5) — transposed?
+    """
+    expected = "(V, 3)" if n is None else f"({n}, 3)"
+    a = _as_float_array(t, name, expected)
+    if a.ndim != 2 or a.shape[1] != 3 or (n is not None and a.shape[0] != n):
+        hint = " — transposed?" if a.ndim == 2 and a.shape[0] == 3 and (n is None or a.shape[1] == n) else ""
+        match = f" to match the {n} rotations of {like_name}" if like_name and n is not None else ""
+        raise ValueError(f"{name} must have shape {expected} (one translation per row{match}); got shape "
+                         f"{a.shape}{hint}")
+    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+    if bad.size:
+        raise ValueError(f"{name} has non-finite entries (NaN or inf) in rows {bad[:5].tolist()}")
+    return a
+
+
+def as_calibration(K, name="K", n_views=None, like_name=None):
+    """A calibration matrix (or a stack), scaled so that ``K[2, 2] == 1``, or ``ValueError``.
+
+    Parameters
+    ----------
+    K : (3, 3) or (V, 3, 3) array_like
+        Upper-triangular or not (skew allowed): what is checked is that it is finite, its last row is
+        ``(0, 0, k)`` with ``k != 0``, and it is invertible.
+    name : str
+    n_views : int, optional
+        When given, a ``(3, 3)`` K is repeated for ``n_views`` views and a stack must have ``n_views`` entries;
+        the result is then always ``(n_views, 3, 3)``.
+
+    Returns
+    -------
+    (3, 3) or (V, 3, 3) ndarray
+
+    Examples
+    --------
+    >>> as_calibration(2 * np.eye(3))[2, 2]
+    np.float64(1.0)
+    >>> as_calibration(np.eye(3), n_views=4).shape
+    (4, 3, 3)
+    >>> as_calibration(np.diag([800.0, 0.0, 1.0]))
+    Traceback (most recent call last):
+    ...
+    ValueError: K is singular (det = 0): a calibration matrix must be invertible
+    """
+    expected = "(3, 3)" if n_views is None else f"(3, 3) or ({n_views}, 3, 3)"
+    a = _as_float_array(K, name, expected)
+    single = a.shape == (3, 3)
+    if single and n_views is not None:
+        a = np.repeat(a[None], n_views, axis=0)
+    elif not single and (a.ndim != 3 or a.shape[1:] != (3, 3) or n_views is None or a.shape[0] != n_views):
+        match = f" (one per view of {like_name})" if like_name and n_views is not None else ""
+        raise ValueError(f"{name} must have shape {expected}{match}; got shape {a.shape}")
+    stack = a.reshape(-1, 3, 3)
+    for k, Km in enumerate(stack):
+        who = name if len(stack) == 1 or single else f"{name}[{k}]"
+        if not np.all(np.isfinite(Km)):
+            raise ValueError(f"{who} has non-finite entries (NaN or inf)")
+        scale = np.abs(Km).max()
+        if scale == 0:
+            raise ValueError(f"{who} is all zeros (singular): not a calibration matrix")
+        if np.any(np.abs(Km[2, :2]) > 1e-12 * scale) or Km[2, 2] == 0:
+            raise ValueError(f"{who} is not a calibration matrix: its last row must be (0, 0, k) with k != 0; "
+                             f"got {Km[2].tolist()}")
+        Kn = Km / Km[2, 2]
+        det = np.linalg.det(Kn)
+        if abs(det) <= 1e-12 * np.abs(Kn).max() ** 3:
+            raise ValueError(f"{who} is singular (det = {det:.3g}): a calibration matrix must be invertible")
+    out = stack / stack[:, 2:3, 2:3]
+    return out[0] if single and n_views is None else out.reshape(a.shape)
+
+
+def as_fundamental(F, name="F"):
+    """F as a (3, 3) array of rank 2 with unit Frobenius norm, plus its right and left null vectors.
+
+    Returns
+    -------
+    F : (3, 3) ndarray
+        The nearest rank-2 matrix, scaled to unit norm (it differs from the input by at most 1e-7 relative).
+    e1, e2 : (3,) ndarray
+        ``F e1 = 0`` and ``e2ᵀ F = 0`` (the epipoles).
+
+    Raises
+    ------
+    ValueError
+        Wrong shape, non-finite entries, rank < 2, or clearly rank 3 (enforce rank 2 first).
+
+    >>> as_fundamental(np.eye(3))
+    Traceback (most recent call last):
+    ...
+    ValueError: F does not have rank 2 (singular values [1. 1. 1.] after scaling): enforce rank 2 first ...
+    """
+    F = as_matrix(F, name, (3, 3))
+    U, s, Vt = np.linalg.svd(F)
+    if s[0] == 0 or s[1] < 1e-12 * s[0]:
+        raise ValueError(f"{name} has rank < 2 (singular values {s}): it is not a fundamental matrix")
+    if s[2] > 1e-7 * s[0]:
+        raise ValueError(f"{name} does not have rank 2 (singular values {s / s[0]} after scaling): "
+                         "enforce rank 2 first (H&Z Sec. 11.1.1)")
+    return (U[:, :2] * (s[:2] / s[0])) @ Vt[:2] / np.linalg.norm(s[:2] / s[0]), Vt[2], U[:, 2]
+
+
+def as_rng(rng, name="rng"):
+    """``rng`` if it is a ``numpy.random.Generator``, else ``ValueError`` (no silent global random state).
+
+    >>> as_rng(None)
+    Traceback (most recent call last):
+    ...
+    ValueError: rng must be a numpy.random.Generator, e.g. np.random.default_rng(0); got None
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"{name} must be a numpy.random.Generator, e.g. np.random.default_rng(0); got {rng!r}")
+    return rng
+
+
+def as_positive(value, name, *, allow_zero=False, allow_inf=False):
+    """A positive (or, with ``allow_zero``, non-negative) finite number, as float; ``ValueError`` otherwise.
+
+    >>> as_positive(-1, "noise_px", allow_zero=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: noise_px must be a non-negative number; got -1
+    """
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and not np.isnan(value)
+    ok = ok and (value >= 0 if allow_zero else value > 0) and (allow_inf or np.isfinite(value))
+    if not ok:
+        what = "non-negative" if allow_zero else "positive"
+        raise ValueError(f"{name} must be a {what} number; got {value!r}")
+    return float(value)
+
+
+def as_fraction(value, name, *, closed=False):
+    """A number in [0, 1) (or [0, 1] with ``closed``), as float; ``ValueError`` otherwise.
+
+    >>> as_fraction(1.5, "outlier_ratio")
+    Traceback (most recent call last):
+    ...
+    ValueError: outlier_ratio must be in [0, 1); got 1.5
+    """
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and 0 <= value and (
+        value <= 1 if closed else value < 1)
+    if not ok:
+        raise ValueError(f"{name} must be in [0, 1{']' if closed else ')'}; got {value!r}")
+    return float(value)
+
+
+def as_probability_open(value, name):
+    """A number strictly between 0 and 1 (a RANSAC confidence), as float; ``ValueError`` otherwise.
+
+    >>> as_probability_open(1.0, "confidence")
+    Traceback (most recent call last):
+    ...
+    ValueError: confidence must be strictly between 0 and 1; got 1.0
+    """
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and 0 < value < 1
+    if not ok:
+        raise ValueError(f"{name} must be strictly between 0 and 1; got {value!r}")
+    return float(value)
+
+
+def as_count(value, name, minimum=1):
+    """An integer ``>= minimum`` (a Python or numpy int, or a float with an integral value), as int.
+
+    >>> as_count(2.5, "n_views", 2)
+    Traceback (most recent call last):
+    ...
+    ValueError: n_views must be an integer >= 2; got 2.5
+    """
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and np.isfinite(value) and \
+        float(value) == int(value) and int(value) >= minimum
+    if not ok:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    return int(value)
+
+
+def as_image_size(image_size, name="image_size", minimum=1):
+    """An image size ``(width, height)`` of two integers ``>= minimum`` (in pixels), as a tuple of ints.
+
+    >>> as_image_size((640, 480.0))
+    (640, 480)
+    >>> as_image_size((480, 640, 3))
+    Traceback (most recent call last):
+    ...
+    ValueError: image_size must be (width, height); got (480, 640, 3)
+    """
+    if np.shape(image_size) != (2,):
+        raise ValueError(f"{name} must be (width, height); got {image_size!r}")
+    return tuple(as_count(v, name, minimum) for v in image_size)
+
+
+def as_tracks(tracks, name="tracks", min_views=1, min_tracks=0):
+    """Return a ``(V, T, 2)`` track array (pixels, NaN where a view does not see a track), or ``ValueError``.
+
+    Refused: another shape, infinite values, an observation with one NaN coordinate, and ``-1`` markers (the VGG
+    files' way of writing "unseen": convert with :func:`labutils.core.scene.nan_tracks`).
+
+    >>> as_tracks(np.full((2, 3, 2), -1.0))
+    Traceback (most recent call last):
+    ...
+    ValueError: tracks[0, 0] is (-1, -1): mark an unseen observation with NaN, not -1 ...
+    """
+    x = _as_float_array(tracks, name, "(V, T, 2)")
+    if x.ndim != 3 or x.shape[2] != 2:
+        raise ValueError(f"{name} must have shape (V, T, 2) (views, tracks, pixel), NaN where unseen; got {x.shape}")
+    if x.shape[0] < min_views or x.shape[1] < min_tracks:
+        raise ValueError(f"{name} needs at least {min_views} views and {min_tracks} tracks; got shape {x.shape}")
+    if np.isinf(x).any():
+        v, k = np.argwhere(np.isinf(x).any(-1))[0]
+        raise ValueError(f"{name}[{v}, {k}] is infinite; mark an unseen observation with NaN")
+    half = np.isnan(x[..., 0]) != np.isnan(x[..., 1])
+    if half.any():
+        v, k = np.argwhere(half)[0]
+        raise ValueError(f"{name}[{v}, {k}] has one NaN coordinate: an unseen observation is NaN in both")
+    marker = (x[..., 0] == -1) & (x[..., 1] == -1)
+    if marker.any():
+        v, k = np.argwhere(marker)[0]
+        raise ValueError(f"{name}[{v}, {k}] is (-1, -1): mark an unseen observation with NaN, not -1 "
+                         "(labutils.core.scene.nan_tracks converts a -1-marked array)")
+    return x
+
+
+def as_mesh(vertices, faces, allow_empty=False):
+    """A triangle mesh: finite ``(N, 3)`` float vertices and ``(F, 3)`` int64 faces indexing them, or ``ValueError``.
+
+    Faces must be integers (a float array is refused, even with integral values) in ``0..N-1``: ``-1`` would
+    silently wrap to the last vertex. ``allow_empty``: zero faces are accepted (a mesh with nothing to draw), and
+    then a single vertex is enough; otherwise a mesh needs a triangle and three vertices.
+
+    >>> as_mesh(np.eye(3), [[0, 1, 2]])[1].dtype
+    dtype('int64')
+    >>> as_mesh(np.eye(3), [[0, 1, -1]])
+    Traceback (most recent call last):
+    ...
+    ValueError: faces hold vertex indices 0..2; got -1..1
+    """
+    V = as_points(vertices, "vertices", dim=3, min_n=1 if allow_empty else 3)
+    try:
+        F = np.asarray(faces)
+    except ValueError as exc:
+        raise ValueError(f"faces must be an (F, 3) integer array of triangles: {exc}") from None
+    if F.ndim != 2 or F.shape[1] != 3 or (F.size and F.dtype.kind not in "iu"):
+        raise ValueError(f"faces must be an (F, 3) integer array of triangles; got shape {F.shape}, dtype {F.dtype}")
+    if len(F) == 0:
+        if not allow_empty:
+            raise ValueError("faces is empty: a mesh needs at least one triangle")
+        return V, np.zeros((0, 3), np.int64)
+    if F.min() < 0 or F.max() >= len(V):
+        raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
+    return V, F.astype(np.int64)

@@ -1,0 +1,199 @@
+"""The essential matrix and the relative pose of two calibrated views (H&Z Sec. 9.6).
+
+Conventions: camera 1 is ``[I | 0]``, camera 2 ``[R | t]``; ``E = [t]× R``; ``F = K2⁻ᵀ E K1⁻¹``; E is defined up to
+scale (and sign), t from E up to scale and sign.
+"""
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..core.geometry import skew
+from ..core.validation import as_calibration, as_matrix, as_rotation
+from .epipolar import canonical_sign, check_pair, transform_points
+from .triangulation import triangulate
+
+
+def fundamental_from_pose(K1: ArrayLike, K2: ArrayLike, R: ArrayLike, t: ArrayLike) -> np.ndarray:
+    """``F = K2⁻ᵀ [t]× R K1⁻¹`` for camera 2 ``[R | t]`` relative to camera 1 ``[I | 0]`` (H&Z eq. 9.2).
+
+    Returns F with unit norm and the package's sign convention.
+
+    Examples
+    --------
+    >>> F = fundamental_from_pose(np.eye(3), np.eye(3), np.eye(3), [1., 0, 0])
+    >>> (F * np.sqrt(2)).round(9) + 0.0
+    array([[ 0.,  0.,  0.],
+           [ 0.,  0.,  1.],
+           [ 0., -1.,  0.]])
+    """
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
+    R = as_rotation(R, "R")
+    t = as_matrix(t, "t", (3,))
+    if not np.linalg.norm(t) > 0:
+        raise ValueError("t is zero: with no baseline the two views are related by a homography and F is not defined")
+    return canonical_sign(np.linalg.inv(K2).T @ skew(t) @ R @ np.linalg.inv(K1))
+
+
+def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np.ndarray:
+    """``E = K2ᵀ F K1``, projected onto the essential manifold (H&Z eq. 9.12, Sec. 9.6.1).
+
+    The projection keeps the singular vectors and sets the singular values to ``(1, 1, 0)``. The closest
+    essential matrix in Frobenius norm has singular values ``((σ₁ + σ₂)/2, (σ₁ + σ₂)/2, 0)`` (H&Z Result 9.18
+    and Sec. 11.7.3); since E is defined up to scale, this is the same matrix scaled to ``(1, 1, 0)``.
+
+    Parameters
+    ----------
+    F : (3, 3) array_like
+    K1, K2 : (3, 3) array_like
+        Calibrations of views 1 and 2.
+
+    Returns
+    -------
+    E : (3, 3) ndarray
+        Singular values exactly (1, 1, 0) (to rounding).
+
+    Examples
+    --------
+    >>> K = np.array([[500., 0, 320], [0, 500, 240], [0, 0, 1]])
+    >>> F = fundamental_from_pose(K, K, np.eye(3), [1., 0, 0])
+    >>> np.linalg.svd(essential_from_fundamental(F, K, K))[1].round(9)
+    array([1., 1., 0.])
+    """
+    F = as_matrix(F, "F", (3, 3))
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
+    U, s, Vt = np.linalg.svd(K2.T @ F @ K1)
+    if s[1] <= 1e-12 * s[0]:
+        raise ValueError(f"K2ᵀ F K1 has rank < 2 (singular values {s}): F is not a fundamental matrix")
+    return U @ np.diag([1.0, 1.0, 0.0]) @ Vt
+
+
+def decompose_essential(E: ArrayLike) -> list:
+    """The four camera poses ``[R | t]`` compatible with E, camera 1 being ``[I | 0]`` (H&Z Result 9.19).
+
+    With ``E = U diag(1, 1, 0) Vᵀ`` (U, V rotations) and ``W = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]``:
+    ``R ∈ {U W Vᵀ, U Wᵀ Vᵀ}`` and ``t = ±u3``. Only one of the four puts the points in front of both
+    cameras: see :func:`pose_from_essential`.
+
+    Parameters
+    ----------
+    E : (3, 3) array_like
+        Essential matrix (any scale; projected onto the manifold by the SVD).
+
+    Returns
+    -------
+    list of 4 tuples (R, t)
+        ``(U W Vᵀ, u3), (U W Vᵀ, -u3), (U Wᵀ Vᵀ, u3), (U Wᵀ Vᵀ, -u3)``; det R = +1, ``|t| = 1``.
+
+    Raises
+    ------
+    ValueError
+        If E is not finite, not 3×3, or has rank < 2.
+
+    Examples
+    --------
+    >>> from labutils.core.geometry import rotation_from_angle_axis
+    >>> R0, t0 = rotation_from_angle_axis([0.1, 0.2, 0.3]), np.array([0.6, 0.0, 0.8])
+    >>> poses = decompose_essential(skew(t0) @ R0)
+    >>> len(poses), any(np.allclose(R, R0) and np.allclose(t, t0) for R, t in poses)
+    (4, True)
+    """
+    E = as_matrix(E, "E", (3, 3))
+    U, s, Vt = np.linalg.svd(E)
+    if s[0] == 0 or s[1] <= 1e-12 * s[0]:
+        raise ValueError(f"E has rank < 2 (singular values {s}): not an essential matrix")
+    if np.linalg.det(U) < 0:
+        U = -U
+    if np.linalg.det(Vt) < 0:
+        Vt = -Vt
+    W = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    Ra, Rb, u3 = U @ W @ Vt, U @ W.T @ Vt, U[:, 2]
+    return [(Ra, u3.copy()), (Ra, -u3), (Rb, u3.copy()), (Rb, -u3)]
+
+
+def _cheirality_counts(poses, y1, y2):
+    """Points in front of both cameras for each pose; y1, y2 are normalised image points."""
+    P1 = np.hstack([np.eye(3), np.zeros((3, 1))])
+    counts = []
+    for R, t in poses:
+        X = triangulate(P1, np.hstack([R, t[:, None]]), y1, y2)
+        ok = np.isfinite(X).all(1) & (X[:, 2] > 0) & (X @ R[2] + t[2] > 0)
+        counts.append(int(ok.sum()))
+    return counts
+
+
+def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> list:
+    """How many correspondences each of the four poses of E puts in front of both cameras (H&Z Sec. 9.6.3).
+
+    Parameters
+    ----------
+    E : (3, 3) array_like
+    x1, x2 : (N, 2) array_like
+        Corresponding pixels.
+    K1, K2 : (3, 3) array_like
+
+    Returns
+    -------
+    list of 4 int
+        In the order of :func:`decompose_essential`; exactly one pose should win.
+
+    Examples
+    --------
+    >>> from labutils.core.synthetic import make_scene
+    >>> from labutils.twoview.epipolar import fundamental_8point
+    >>> s = make_scene(20, 2, noise_px=0.0, rng=np.random.default_rng(0))
+    >>> x1, x2, _ = s.pair(0, 1, which="true")
+    >>> E = essential_from_fundamental(fundamental_8point(x1, x2), s.K, s.K)
+    >>> sorted(cheirality_counts(E, x1, x2, s.K, s.K))[-2:]
+    [0, 20]
+    """
+    x1, x2 = check_pair(x1, x2, 1)
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
+    y1, y2 = transform_points(np.linalg.inv(K1), x1), transform_points(np.linalg.inv(K2), x2)
+    return _cheirality_counts(decompose_essential(E), y1, y2)
+
+
+def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
+    """Relative pose of camera 2 (camera 1 = ``[I | 0]``) from E, chosen by cheirality (H&Z Sec. 9.6.3).
+
+    Each of the four poses of :func:`decompose_essential` is used to triangulate the correspondences
+    (linear DLT on ``K⁻¹ x``); the pose that puts the most points in front of both cameras wins
+    (:func:`cheirality_counts` gives the four counts).
+
+    Parameters
+    ----------
+    E : (3, 3) array_like
+        Essential matrix, ``x2_nᵀ E x1_n = 0`` for normalised coordinates ``x_n = K⁻¹ x_h``.
+    x1, x2 : (N, 2) array_like
+        Corresponding pixels (inliers), N >= 1.
+    K1, K2 : (3, 3) array_like
+
+    Returns
+    -------
+    R : (3, 3) ndarray
+        det +1.
+    t : (3,) ndarray
+        ``|t| = 1``: the translation direction (the scale is not observable).
+
+    Raises
+    ------
+    ValueError
+        Bad input, or no pose puts more points in front than every other (e.g. no baseline).
+
+    Examples
+    --------
+    >>> from labutils.core.synthetic import make_scene
+    >>> from labutils.twoview.epipolar import fundamental_8point
+    >>> from labutils.core.geometry import relative_pose
+    >>> s = make_scene(20, 2, noise_px=0.0, rng=np.random.default_rng(0))
+    >>> x1, x2, _ = s.pair(0, 1, which="true")
+    >>> E = essential_from_fundamental(fundamental_8point(x1, x2), s.K, s.K)
+    >>> R, t = pose_from_essential(E, x1, x2, s.K, s.K)
+    >>> R_true, t_true = relative_pose(s.R[0], s.t[0], s.R[1], s.t[1])
+    >>> bool(np.allclose(R, R_true) and np.allclose(t, t_true / np.linalg.norm(t_true)))
+    True
+    """
+    counts = cheirality_counts(E, x1, x2, K1, K2)
+    order = np.argsort(counts)[::-1]
+    if counts[order[0]] == 0 or counts[order[0]] == counts[order[1]]:
+        raise ValueError(f"cheirality cannot decide between the four poses (points in front: {counts}); "
+                         "no baseline, or the correspondences do not fit E")
+    return decompose_essential(E)[order[0]]
