@@ -196,6 +196,16 @@ def test_files_are_one_idea_in_size():
     assert not long, f"files over {MAX_LINES} lines (split them, or say why in LONG_ON_PURPOSE): {long}"
 
 
+def test_one_levenberg_marquardt_loop():
+    """One LM loop with one damping rule (Nielsen's) serves every solver: no other file changes a damping."""
+    rules = [re.compile(r"1\s*/\s*3\s*,\s*1\s*-\s*\(\s*2\s*\*"),                   # Nielsen's max(1/3, 1 - (2ρ - 1)³)
+             re.compile(r"\b(nu|ν)\s*\*=?\s*2\b"),                                  # ν doubling
+             re.compile(r"\b(mu|lam|lambda_|damping)\w*\s*(\*=|/=|\*|/)\s*(10|nu)\b")]   # Levenberg's ×10 / ÷10
+    found = sorted(f.relative_to(PKG).as_posix() for f in PKG.rglob("*.py")
+                   if any(rule.search(f.read_text()) for rule in rules))
+    assert found == ["core/lm.py"], f"a damping rule outside labutils/core/lm.py: {found}"
+
+
 def _notebook_imports():
     for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
         for cell in json.loads(nb.read_text())["cells"]:

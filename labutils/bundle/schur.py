@@ -1,6 +1,6 @@
 """Our bundle-adjustment solver: Levenberg–Marquardt on the normal equations with the Schur complement.
 
-Madsen, Nielsen & Tingleff 2004, Alg. 3.16 (Marquardt's diagonal scaling, Nielsen's damping update); the 3×3
+The loop is the package's one (:mod:`labutils.core.lm`: Marquardt's diagonal scaling, Nielsen's damping update); the 3×3
 point blocks are eliminated by the Schur complement (Triggs et al. 2000, Sec. 6.1; H&Z Sec. A6.3) and the
 reduced camera system is solved by dense Cholesky. Robust losses by iteratively reweighted least squares, then
 the loss's second-order curvature near the optimum (:mod:`labutils.core.robust`). Called through
@@ -16,6 +16,7 @@ import scipy.linalg
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
+from ..core.lm import minimise
 from ..core.robust import CURVATURE_FLOOR, SECOND_ORDER_AFTER, rho
 from ..core.validation import as_positive
 from .reprojection import check_problem, project_observations
@@ -75,99 +76,88 @@ class _SchurStructure:
 
 
 def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter, tol, verbose):
-    """Levenberg–Marquardt with the Schur complement; see :func:`bundle_adjust`. Returns a dict."""
+    """Levenberg–Marquardt with the Schur complement; see :func:`bundle_adjust`. Returns a dict.
+
+    The loop is the package's one (:func:`labutils.core.lm.minimise`); what is particular to bundle adjustment is
+    the local model, :class:`_SchurModel`: the normal equations' blocks, robust weights, frozen parameters, and the
+    damped step by the Schur complement.
+    """
     V, k = cp0.shape
     M = X0.shape[0]
     st = _SchurStructure(ci, pi, V, M)
     mask_c = free_cam[ci].astype(float)[:, None, :]                 # zero the frozen columns
     mask_p = free_pt[pi].astype(float)[:, None, None]
     frozen_c, frozen_p = ~free_cam, ~free_pt
+    state = {"second_order": False}
 
-    def cost_of(cp, X):
+    def cost(p):
+        cp, X = p
         r = project_observations(cp, X, ci, pi, Ks) - x
-        return 0.5 * f_scale ** 2 * rho((r / f_scale) ** 2, loss)[0].sum(), r
+        return 0.5 * f_scale ** 2 * rho((r / f_scale) ** 2, loss)[0].sum()
 
-    cp, X = cp0.copy(), X0.copy()
-    F, _ = cost_of(cp, X)
-    mu, nu = None, 2.0
-    n_iter, n_eval, status = 0, 1, "maximum number of iterations reached"
-    success = False
-    need_jac = True
-    second_order = False
-    x_norm = np.sqrt((cp ** 2).sum() + (X ** 2).sum())
-    while n_iter < max_iter:
-        if need_jac:
-            u, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
-            r = u - x
-            n_iter += 1
-            Jc, Jp = Jc * mask_c, Jp * mask_p
-            if loss != "linear":
-                # Robust loss: the gradient of 0.5 f² ρ(r²/f²) is ρ' r J. Far from the optimum we weight the
-                # rows by sqrt(ρ') (IRLS: curvature ρ' JᵀJ, a convex model whatever the residuals). IRLS
-                # overestimates the curvature of residuals beyond the scale, so its steps there are too short
-                # and it converges only linearly; once the cost decrease slows (below 1e-3 relative) we switch
-                # to the exact second-order curvature of the loss, ρ' + 2 z ρ'' (Triggs et al. Sec. 4.3; what
-                # scipy uses from the start), floored at 0.01 ρ' to keep the model convex.
-                z = (r / f_scale) ** 2
-                _, d1, d2 = rho(z, loss)
-                hw = np.sqrt(np.maximum(d1 + 2 * z * d2, CURVATURE_FLOOR * d1) if second_order else d1)
-                r = r * d1 / hw
-                Jc, Jp = Jc * hw[:, :, None], Jp * hw[:, :, None]
-            U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, r)
-            # frozen parameters: identity rows, zero gradient (their step is exactly 0)
-            ic = np.nonzero(frozen_c)
-            U[ic[0], ic[1], ic[1]] = 1.0
-            Vp[frozen_p] = np.eye(3)
-            Dc = np.clip(np.diagonal(U, axis1=1, axis2=2), 1e-6, 1e32)      # Marquardt scaling
-            Dp = np.clip(np.diagonal(Vp, axis1=1, axis2=2), 1e-6, 1e32)
-            g_inf = max(np.abs(gc).max(initial=0.0), np.abs(gp).max(initial=0.0))
-            if mu is None:
-                mu = 1e-4
-            if g_inf <= 1e-14 * max(1.0, F):
-                status, success = "gradient is zero to machine precision", True
-                break
-            need_jac = False
-        try:
-            dc, dp, _, _ = _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c, frozen_p)
-        except np.linalg.LinAlgError:
-            mu *= nu
-            nu *= 2
-            continue
-        h_norm = np.sqrt((dc ** 2).sum() + (dp ** 2).sum())
-        xtol = 1e-2 * tol                                          # Ceres: 1e-8 with function tolerance 1e-6
-        if h_norm <= xtol * (x_norm + xtol):
-            status, success = "step size below xtol", True
-            break
-        pred = 0.5 * (mu * ((Dc * dc ** 2).sum() + (Dp * dp ** 2).sum()) - (gc * dc).sum() - (gp * dp).sum())
-        cp_new, X_new = cp + dc, X + dp
-        F_new, _ = cost_of(cp_new, X_new)
-        n_eval += 1
-        gain = (F - F_new) / pred if pred > 0 else -1.0
-        if verbose:
-            if n_eval == 2:
-                print(f"{'iter':>4} {'cost':>13} {'cost_change':>12} {'|gradient|':>11} {'|step|':>10} "
-                      f"{'gain':>7} {'damping':>9}", file=sys.stderr)
-            print(f"{n_iter:4d} {F:13.6e} {F - F_new:12.4e} {g_inf:11.3e} {h_norm:10.3e} {gain:7.3f} {mu:9.2e}"
-                  + ("" if gain > 0 and np.isfinite(F_new) else "  (rejected)"), file=sys.stderr, flush=True)
-        if gain > 0 and np.isfinite(F_new):
-            dF = F - F_new
-            cp, X, F = cp_new, X_new, F_new
-            x_norm = np.sqrt((cp ** 2).sum() + (X ** 2).sum())
-            mu *= max(1 / 3, 1 - (2 * gain - 1) ** 3)
-            nu = 2.0
-            need_jac = True
-            if dF <= SECOND_ORDER_AFTER * F_new:
-                second_order = True
-            if dF <= tol * F_new or F_new == 0.0:
-                status, success = "relative cost reduction below ftol", True
-                break
-        else:
-            mu *= nu
-            nu *= 2
-            if mu > 1e32:
-                status, success = "damping exceeded 1e32: no further reduction possible", True
-                break
-    return dict(cp=cp, X=X, n_iter=n_iter, n_eval=n_eval, success=success, message=status)
+    def linearise(p):
+        cp, X = p
+        u, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
+        r = u - x
+        Jc, Jp = Jc * mask_c, Jp * mask_p
+        if loss != "linear":
+            # Robust loss: the gradient of 0.5 f² ρ(r²/f²) is ρ' r J. Far from the optimum we weight the rows by
+            # sqrt(ρ') (IRLS: curvature ρ' JᵀJ, a convex model whatever the residuals). IRLS overestimates the
+            # curvature of residuals beyond the scale, so its steps there are too short and it converges only
+            # linearly; once the cost decrease slows (below 1e-3 relative) we switch to the exact second-order
+            # curvature of the loss, ρ' + 2 z ρ'' (Triggs et al. Sec. 4.3; what scipy uses from the start),
+            # floored at 0.01 ρ' to keep the model convex.
+            z = (r / f_scale) ** 2
+            _, d1, d2 = rho(z, loss)
+            hw = np.sqrt(np.maximum(d1 + 2 * z * d2, CURVATURE_FLOOR * d1) if state["second_order"] else d1)
+            r = r * d1 / hw
+            Jc, Jp = Jc * hw[:, :, None], Jp * hw[:, :, None]
+        return _SchurModel(st, Jc, Jp, r, ci, pi, frozen_c, frozen_p)
+
+    def accepted(F_old, F_new):
+        if F_old - F_new <= SECOND_ORDER_AFTER * F_new:
+            state["second_order"] = True
+
+    def log(n_iter, F, F_new, g_inf, h_norm, gain, mu, taken):
+        if not state.get("header"):
+            print(f"{'iter':>4} {'cost':>13} {'cost_change':>12} {'|gradient|':>11} {'|step|':>10} "
+                  f"{'gain':>7} {'damping':>9}", file=sys.stderr)
+            state["header"] = True
+        print(f"{n_iter:4d} {F:13.6e} {F - F_new:12.4e} {g_inf:11.3e} {h_norm:10.3e} {gain:7.3f} {mu:9.2e}"
+              + ("" if taken else "  (rejected)"), file=sys.stderr, flush=True)
+
+    res = minimise(cost, linearise, (cp0.copy(), X0.copy()), retract=lambda p, h: (p[0] + h[0], p[1] + h[1]),
+                   norm=lambda p: float(np.sqrt((p[0] ** 2).sum() + (p[1] ** 2).sum())), max_iter=max_iter,
+                   ftol=tol, xtol=1e-2 * tol, gtol=1e-14, mu0=1e-4, accepted=accepted,   # Ceres: xtol 1e-8, ftol 1e-6
+                   log=log if verbose else None)
+    cp, X = res.p
+    return dict(cp=cp, X=X, n_iter=res.n_iter, n_eval=res.n_eval, success=res.converged, message=res.message)
+
+
+class _SchurModel:
+    """The local model of bundle adjustment at one point: the blocks of ``JᵀJ`` and ``Jᵀr``, Marquardt's scaling,
+    and the damped step by the Schur complement (what :func:`labutils.core.lm.minimise` asks of a model)."""
+
+    def __init__(self, st, Jc, Jp, r, ci, pi, frozen_c, frozen_p):
+        U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, r)
+        # frozen parameters: identity rows, zero gradient (their step is exactly 0)
+        ic = np.nonzero(frozen_c)
+        U[ic[0], ic[1], ic[1]] = 1.0
+        Vp[frozen_p] = np.eye(3)
+        self.Dc = np.clip(np.diagonal(U, axis1=1, axis2=2), 1e-6, 1e32)      # Marquardt scaling
+        self.Dp = np.clip(np.diagonal(Vp, axis1=1, axis2=2), 1e-6, 1e32)
+        self.blocks = (U, Vp, W, gc, gp)
+        self.st, self.ci, self.pi, self.frozen_c, self.frozen_p = st, ci, pi, frozen_c, frozen_p
+        self.gradient_max = max(np.abs(gc).max(initial=0.0), np.abs(gp).max(initial=0.0))
+
+    def step(self, mu):
+        U, Vp, W, gc, gp = self.blocks
+        dc, dp, _, _ = _damped_step(self.st, U, Vp, W, gc, gp, self.Dc, self.Dp, mu, self.ci, self.pi,
+                                    self.frozen_c, self.frozen_p)
+        h_norm = float(np.sqrt((dc ** 2).sum() + (dp ** 2).sum()))
+        predicted = 0.5 * (mu * ((self.Dc * dc ** 2).sum() + (self.Dp * dp ** 2).sum())
+                           - (gc * dc).sum() - (gp * dp).sum())
+        return (dc, dp), h_norm, float(predicted)
 
 
 def _normal_blocks(st, Jc, Jp, r):

@@ -67,6 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.geometry import rotation_from_angle_axis, skew
+from ..core.lm import DenseLinearisation, minimise
 from ..core.ransac import ransac
 from ..core.validation import as_count, as_matrix, as_points, as_positive, as_rng
 
@@ -362,48 +363,47 @@ def _sampson_fundamental(x1, x2, T1, T2, starts_n, max_iter=50, tol=1e-7):
     fast. F is kept of rank 2 by the orthonormal representation (Bartoli & Sturm 2004): in normalised
     coordinates ``F_n = U diag(1, s, 0) Vᵀ`` with U, V rotations, updated as ``U exp([ω_U]×)``,
     ``V exp([ω_V]×)`` and ``s + δs`` (7 parameters); ``F = T2ᵀ F_n T1``. Each normalised start in
-    ``starts_n`` is refined and the lowest cost wins. Returns ``(F, cost)``, F of unit norm.
+    ``starts_n`` is refined (the package's LM loop, :func:`labutils.core.lm.minimise`) and the lowest cost wins.
+    Returns ``(F, cost)``, F of unit norm and the cost ``Σ d²``.
     """
     n = len(x1)
     x1_h = np.hstack([x1, np.ones((n, 1))])
     x2_h = np.hstack([x2, np.ones((n, 1))])
+
+    def pixels(q):
+        U, s, V = q
+        return T2.T @ (U * [1.0, s, 0.0]) @ V.T @ T1
+
+    def cost(q):
+        d, _ = _sampson_and_gradient(pixels(q), x1_h, x2_h)
+        return 0.5 * d @ d
+
+    def linearise(q):
+        U, s, V = q
+        d, G = _sampson_and_gradient(pixels(q), x1_h, x2_h)
+        S = np.diag([1.0, s, 0.0])
+        dFn = np.concatenate([U @ _E_SKEW @ S @ V.T, -(U @ S) @ _E_SKEW @ V.T,
+                              (U @ np.diag([0.0, 1.0, 0.0]) @ V.T)[None]])      # ∂F_n / ∂(ω_U, ω_V, s)
+        return DenseLinearisation(np.einsum("nij,pij->np", G, T2.T @ dFn @ T1), d)   # J (N, 7)
+
+    def retract(q, h):
+        U, s, V = q
+        return U @ rotation_from_angle_axis(h[:3]), s + h[6], V @ rotation_from_angle_axis(h[3:6])
+
     best = (np.inf, None)
     for Fn in starts_n:
         U, sv, Vt = np.linalg.svd(Fn)
         if not sv[0] > 0:
             continue
-        U, V, s = U * np.sign(np.linalg.det(U)), Vt.T * np.sign(np.linalg.det(Vt)), sv[1] / sv[0]
-
-        def pixels(U, s, V):
-            return T2.T @ (U * [1.0, s, 0.0]) @ V.T @ T1
-
-        d, G = _sampson_and_gradient(pixels(U, s, V), x1_h, x2_h)
-        cost, lam = d @ d, 1e-3
-        for _ in range(max_iter):
-            if not np.isfinite(cost):
-                break
-            S = np.diag([1.0, s, 0.0])
-            dFn = np.concatenate([U @ _E_SKEW @ S @ V.T, -(U @ S) @ _E_SKEW @ V.T,
-                                  (U @ np.diag([0.0, 1.0, 0.0]) @ V.T)[None]])      # ∂F_n / ∂(ω_U, ω_V, s)
-            J = np.einsum("nij,pij->np", G, T2.T @ dFn @ T1)             # (N, 7)
-            A, g = J.T @ J, J.T @ d
-            improved = False
-            while lam < 1e10:
-                step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12 * np.trace(A)), -g)
-                U2, V2 = U @ rotation_from_angle_axis(step[:3]), V @ rotation_from_angle_axis(step[3:6])
-                d2, G2 = _sampson_and_gradient(pixels(U2, s + step[6], V2), x1_h, x2_h)
-                cost2 = d2 @ d2
-                if np.isfinite(cost2) and cost2 < cost:
-                    small = cost - cost2 <= tol * cost
-                    U, V, s, d, G, cost = U2, V2, s + step[6], d2, G2, cost2
-                    lam, improved = max(lam / 10, 1e-12), True
-                    break
-                lam *= 10
-            if not improved or small:
-                break
-        if cost < best[0]:
-            F = pixels(U, s, V)
-            best = (cost, F / np.linalg.norm(F))
+        q0 = (U * np.sign(np.linalg.det(U)), sv[1] / sv[0], Vt.T * np.sign(np.linalg.det(Vt)))
+        try:
+            res = minimise(cost, linearise, q0, retract=retract, norm=lambda q: 0.0, max_iter=max_iter, ftol=tol,
+                           xtol=0.0, gtol=0.0, mu0=1e-3)
+        except ValueError:                                  # not finite at the start: this start is useless
+            continue
+        if 2 * res.cost < best[0]:
+            F = pixels(res.p)
+            best = (2 * res.cost, F / np.linalg.norm(F))
     return best[1], best[0]
 
 

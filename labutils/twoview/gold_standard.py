@@ -11,6 +11,7 @@ import scipy.sparse
 from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
+from ..core.lm import minimise
 from ..core.validation import as_count, as_fundamental, as_positive
 from .epipolar import (
     canonical_sign,
@@ -140,13 +141,14 @@ class GoldStandardProblem:
                 transform_points(np.linalg.inv(self.T2), y[:, :2] / y[:, 2:]))
 
     def solve(self, p=None, max_iter=100, tol=1e-10):
-        """Levenberg–Marquardt with the Schur complement on the 3×3 point blocks (H&Z Sec. A6.3-A6.4).
+        """Levenberg–Marquardt (the package's loop, :func:`labutils.core.lm.minimise`) with the Schur complement on
+        the 3×3 point blocks (H&Z Sec. A6.3-A6.4).
 
         The normal equations ``[U W; Wᵀ V] [δa; δb] = -[g_a; g_b]`` (a: the 12 camera entries, b: the points,
         V block diagonal) are reduced to the 12×12 system ``(U - W V⁻¹ Wᵀ) δa = -g_a + W V⁻¹ g_b``; each point
-        step is then ``δb_i = -V_i⁻¹ (g_b_i + W_iᵀ δa)``. Marquardt damping ``(1 + λ)`` on the diagonals, plus
-        a tiny ``λ`` absolute term, also fixes the gauge. A step is kept only if it lowers the cost, so the
-        cost never rises above the initial one.
+        step is then ``δb_i = -V_i⁻¹ (g_b_i + W_iᵀ δa)`` (:class:`_GoldStandardModel`). Marquardt's scaling plus a
+        tiny absolute term also fixes the gauge. A step is kept only if it lowers the cost, so the cost never rises
+        above the initial one.
 
         Returns
         -------
@@ -154,52 +156,52 @@ class GoldStandardProblem:
         info : dict
             ``cost`` (history of 0.5 Σ r², per accepted step), ``n_iter``, ``converged``.
         """
-        p = self.p0.copy() if p is None else np.array(p, float)
-        r = self.residuals(p)
-        cost = 0.5 * r @ r
-        history, lam, converged = [cost], 1e-3, False
-        it = 0
-        while it < max_iter:
-            it += 1
-            A, B = self._blocks(p)
-            rr = r.reshape(self.n, 4)
-            A2 = A.reshape(-1, 12)
-            U = A2.T @ A2
-            V = B.transpose(0, 2, 1) @ B
-            W = A.transpose(0, 2, 1) @ B[:, 2:, :]                  # (N, 12, 3)
-            ga = A2.T @ rr[:, 2:].ravel()
-            gb = (B.transpose(0, 2, 1) @ rr[:, :, None])[:, :, 0]
-            improved = False
-            while lam < 1e16:
-                Ud = U + lam * (np.diag(np.diag(U)) + 1e-12 * np.trace(U) / 12 * np.eye(12))
-                dV = np.einsum("nii->ni", V)
-                Vd = V + lam * (dV[:, :, None] * np.eye(3) + 1e-12 * dV.sum(1)[:, None, None] / 3 * np.eye(3))
-                Vinv = np.linalg.inv(Vd)
-                WVinv = W @ Vinv
-                S = Ud - WVinv.transpose(1, 0, 2).reshape(12, -1) @ W.transpose(1, 0, 2).reshape(12, -1).T
-                rhs = -ga + WVinv.transpose(1, 0, 2).reshape(12, -1) @ gb.ravel()
-                try:
-                    da = np.linalg.solve(S, rhs)
-                except np.linalg.LinAlgError:
-                    lam *= 10
-                    continue
-                db = -(Vinv @ (gb + (W.transpose(0, 2, 1) @ da))[:, :, None])[:, :, 0]
-                p_new = p + np.concatenate([da, db.ravel()])
-                r_new = self.residuals(p_new)
-                cost_new = 0.5 * r_new @ r_new
-                if np.isfinite(cost_new) and cost_new < cost:
-                    p_new[:12] /= np.linalg.norm(p_new[:12])          # a pure gauge move (P2 up to scale)
-                    done = cost - cost_new <= tol * cost
-                    p, r, cost = p_new, self.residuals(p_new), cost_new
-                    history.append(cost)
-                    lam = max(lam / 10, 1e-12)
-                    improved = True
-                    break
-                lam *= 10
-            if not improved or done:
-                converged = True
-                break
-        return p, dict(cost=np.array(history), n_iter=it, converged=converged)
+        p0 = self.p0.copy() if p is None else np.array(p, float)
+
+        def cost(q):
+            r = self.residuals(q)
+            return 0.5 * r @ r
+
+        def retract(q, h):
+            q = q + h
+            q[:12] /= np.linalg.norm(q[:12])                 # a pure gauge move (P2 up to scale)
+            return q
+
+        res = minimise(cost, lambda q: _GoldStandardModel(self, q), p0, retract=retract, max_iter=max_iter,
+                       ftol=tol, xtol=0.0, gtol=0.0, mu0=1e-3)
+        return res.p, dict(cost=np.array(res.costs), n_iter=res.n_iter, converged=res.converged)
+
+
+class _GoldStandardModel:
+    """The gold standard's local model: the blocks of ``JᵀJ`` and ``Jᵀr`` (12 camera entries, 3 per point) and the
+    damped step by the Schur complement on the point blocks."""
+
+    def __init__(self, problem, p):
+        A, B = problem._blocks(p)
+        rr = problem.residuals(p).reshape(problem.n, 4)
+        A2 = A.reshape(-1, 12)
+        self.U = A2.T @ A2
+        self.V = B.transpose(0, 2, 1) @ B
+        self.W = A.transpose(0, 2, 1) @ B[:, 2:, :]                 # (N, 12, 3)
+        self.ga = A2.T @ rr[:, 2:].ravel()
+        self.gb = (B.transpose(0, 2, 1) @ rr[:, :, None])[:, :, 0]
+        self.Da = np.diag(self.U) + 1e-12 * np.trace(self.U) / 12
+        dV = np.einsum("nii->ni", self.V)
+        self.Db = dV + 1e-12 * dV.sum(1, keepdims=True) / 3
+        self.gradient_max = float(max(np.abs(self.ga).max(), np.abs(self.gb).max()))
+
+    def step(self, mu):
+        Ud = self.U + mu * np.diag(self.Da)
+        Vd = self.V + mu * self.Db[:, :, None] * np.eye(3)
+        Vinv = np.linalg.inv(Vd)
+        WVinv = (self.W @ Vinv).transpose(1, 0, 2).reshape(12, -1)
+        S = Ud - WVinv @ self.W.transpose(1, 0, 2).reshape(12, -1).T
+        da = np.linalg.solve(S, -self.ga + WVinv @ self.gb.ravel())
+        db = -(Vinv @ (self.gb + (self.W.transpose(0, 2, 1) @ da))[:, :, None])[:, :, 0]
+        h = np.concatenate([da, db.ravel()])
+        g = np.concatenate([self.ga, self.gb.ravel()])
+        D = np.concatenate([self.Da, self.Db.ravel()])
+        return h, float(np.linalg.norm(h)), 0.5 * float(h @ (mu * D * h - g))
 
 
 @dataclass

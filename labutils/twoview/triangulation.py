@@ -6,6 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.geometry import camera_center
+from ..core.lm import nielsen
 from ..core.validation import (
     as_array,
     as_calibration,
@@ -366,10 +367,10 @@ def _refine_points(Ps, xs, use, X, n_iter=3):
     """Each point moved to (near) its maximum-likelihood position in the views of ``use`` (H&Z Sec. 12.3, A6.2).
 
     ``n_iter`` Levenberg–Marquardt steps on each point's reprojection error, all points at once (3×3 normal
-    equations per point); from the DLT, three reach the optimum to 1e-6 px on the dinosaur. The DLT
-    minimises an algebraic error whose weights depend on the world frame: from cameras that differ only
-    by a similarity it gives reprojection errors that differ by pixels, so decisions taken on them
-    (inlier or not) would depend on the gauge. The reprojection error does not.
+    equations per point, the package's damping rule :func:`labutils.core.lm.nielsen`); from the DLT, three reach
+    the optimum to 1e-6 px on the dinosaur. The DLT minimises an algebraic error whose weights depend on the world
+    frame: from cameras that differ only by a similarity it gives reprojection errors that differ by pixels, so
+    decisions taken on them (inlier or not) would depend on the gauge. The reprojection error does not.
 
     Parameters
     ----------
@@ -405,7 +406,7 @@ def _refine_points(Ps, xs, use, X, n_iter=3):
 
     Xc = X[cols]
     r, u, q, cost = evaluate(Xc)
-    lam = np.full(N, 1e-3)
+    lam, nu = np.full(N, 1e-3), np.full(N, 2.0)
     for _ in range(n_iter):
         J = (P[:, :2, :3] - u[:, :, None] * P[:, 2:3, :3]) / q[:, 2, None, None]          # (n, 2, 3)
         JtJ = np.stack([np.bincount(j, np.einsum("nk,nk->n", J[:, :, a], J[:, :, b]), N)
@@ -416,9 +417,14 @@ def _refine_points(Ps, xs, use, X, n_iter=3):
         ok = np.isfinite(cost) & np.all(np.isfinite(A), axis=(1, 2)) & (np.abs(np.linalg.det(A)) > 0)
         step = np.zeros((N, 3))
         step[ok] = np.linalg.solve(A[ok], -g[ok][:, :, None])[:, :, 0]
-        better = ok & (evaluate(Xc + step)[3] < cost)
+        cost_new = evaluate(Xc + step)[3]
+        better = ok & (cost_new < cost)
+        predicted = 0.5 * np.einsum("ni,ni->n", step, (lam[:, None] * d + 1e-12 * d.sum(1, keepdims=True)) * step
+                                    - g)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gain = np.where(better & (predicted > 0), 0.5 * (cost - cost_new) / predicted, -1.0)
         Xc = np.where(better[:, None], Xc + step, Xc)
-        lam = np.where(better, lam / 10, lam * 10)
+        lam, nu = nielsen(lam, nu, gain)           # the package's damping rule (labutils.core.lm)
         r, u, q, cost = evaluate(Xc)
     X[cols] = Xc
     return X
