@@ -31,7 +31,7 @@ from labutils.model.carving import (
     silhouette_ious,
     surface_mesh,
 )
-from labutils.model.carving.synthetic import make_snowman
+from labutils.model.synthetic import make_snowman
 
 ROOT = Path(__file__).resolve().parents[1]
 

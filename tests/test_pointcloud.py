@@ -16,7 +16,7 @@ from labutils.model.pointcloud import (
     point_colors,
     sample_image,
 )
-from labutils.model.textured_scene import make_textured_scene
+from labutils.model.synthetic import make_textured_scene
 from labutils.twoview.triangulation import triangulate_multiview
 
 

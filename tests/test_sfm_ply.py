@@ -13,7 +13,7 @@ import pytest
 from labutils.data.formats import write_tracks
 from labutils.data.ply import read_model, validate_ply
 from labutils.model.pointcloud import facing_fractions
-from labutils.model.textured_scene import make_textured_scene
+from labutils.model.synthetic import make_textured_scene
 from labutils.sfm.reconstruction import Reconstruction, align_reconstruction
 
 ROOT = Path(__file__).resolve().parents[1]

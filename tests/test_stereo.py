@@ -28,7 +28,8 @@ from labutils.model.stereo import (
     zncc,
     zncc_volume,
 )
-from labutils.model.stereo.synthetic import make_layered_pair, make_textured_spheres
+from labutils.model.stereo.synthetic import make_layered_pair
+from labutils.model.synthetic import make_textured_spheres
 from labutils.twoview.triangulation import triangulate
 
 WINDOW = 7
@@ -424,9 +425,9 @@ def test_synthetic_spheres_know_their_depths():
     scene = make_textured_spheres(3, rng=np.random.default_rng(11), image_size=(40, 30), f=60.0)
     dm = DepthMap(scene.depths[0], scene.K[0], scene.R[0], scene.t[0])
     assert np.abs(scene.distance_to_surface(dm.points())).max() < 1e-9
-    X = scene.surface_points(100, rng=np.random.default_rng(12))
+    X, _ = scene.surface_points(100, rng=np.random.default_rng(12))
     assert np.abs(scene.distance_to_surface(X)).max() < 1e-9
-    vis = scene.visible(X)
+    vis = scene.visibility(X)
     assert vis.shape == (3, 100) and 0.2 < vis.mean() < 0.8
 
 

@@ -8,7 +8,7 @@ from scipy.spatial import ConvexHull
 from labutils.core.synthetic import look_at
 from labutils.model.carving import mesh_volume, render_silhouette
 from labutils.model.meshing import delaunay_mesh
-from labutils.model.textured_scene import make_textured_scene
+from labutils.model.synthetic import make_textured_scene
 from labutils.model.texturing import (
     edge_contrast,
     held_out_error,

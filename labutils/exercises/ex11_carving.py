@@ -2,7 +2,7 @@
 import numpy as np
 
 from ..model.carving import inside_silhouette, mask_iou
-from ..model.carving.synthetic import make_snowman
+from ..model.synthetic import make_snowman
 from .runner import run_checks
 
 __all__ = ["check_silhouette_from_colour", "check_carve_step", "check_mask_iou"]

@@ -3,7 +3,7 @@ space carving, and dense stereo from known cameras.
 
 Modules: :mod:`~labutils.model.pointcloud` (colours from the images, PCA normals oriented by visibility),
 :mod:`~labutils.model.meshing` (Delaunay meshes carved through long edges), :mod:`~labutils.model.texturing`
-(vertex colours from the most frontal unoccluded view), :mod:`~labutils.model.textured_scene` (a synthetic textured
+(vertex colours from the most frontal unoccluded view), :mod:`~labutils.model.synthetic` (the synthetic
 object with exact truth), :mod:`~labutils.model.carving` (silhouettes, voxel carving, marching cubes;
 ``python -m labutils.carve``) and :mod:`~labutils.model.stereo` (rectified pairs, plane-sweep ZNCC, the left–right
 check, depth maps and their fusion).
@@ -12,7 +12,6 @@ from .carving import (
     THRESHOLD_CANDIDATES,
     BackgroundModel,
     Carving,
-    CarvingScene,
     VoxelGrid,
     background_model,
     bounding_box_from_silhouettes,
@@ -21,7 +20,6 @@ from .carving import (
     clean_mask,
     colour_distance,
     inside_silhouette,
-    make_snowman,
     mask_iou,
     mesh_volume,
     project_with_depth,
@@ -49,7 +47,6 @@ from .stereo import (
     FusedCloud,
     LayeredPair,
     RectifiedPair,
-    SphereScene,
     box_mean,
     depth_agreement,
     depth_from_disparity,
@@ -60,7 +57,6 @@ from .stereo import (
     fuse_depth_maps,
     left_right_check,
     make_layered_pair,
-    make_textured_spheres,
     merge_points,
     rectify_pair,
     ring_pairs,
@@ -69,7 +65,7 @@ from .stereo import (
     zncc,
     zncc_volume,
 )
-from .textured_scene import TexturedScene, make_textured_scene
+from .synthetic import SphereScene, make_snowman, make_textured_scene, make_textured_spheres
 from .texturing import (
     VertexTexture,
     VertexViews,
@@ -81,16 +77,16 @@ from .texturing import (
     vertex_views,
 )
 
-__all__ = ["THRESHOLD_CANDIDATES", "BackgroundModel", "Carving", "CarvingScene", "VoxelGrid", "background_model",
+__all__ = ["THRESHOLD_CANDIDATES", "BackgroundModel", "Carving", "VoxelGrid", "background_model",
            "bounding_box_from_silhouettes", "carve", "choose_threshold", "clean_mask", "colour_distance",
            "inside_silhouette", "make_snowman", "mask_iou", "mesh_volume", "project_with_depth", "render_silhouette",
            "signed_distance_map", "silhouette", "silhouette_ious", "surface_mesh", "DelaunayMesh", "boundary_faces",
            "delaunay_mesh", "face_normals", "vertex_normals", "LocalPCA", "PointCloud", "cloud_from_reconstruction",
            "estimate_normals", "facing_fractions", "local_pca", "orient_normals", "oriented_point_cloud",
-           "point_colors", "sample_image", "DepthMap", "FusedCloud", "LayeredPair", "RectifiedPair", "SphereScene",
+           "point_colors", "sample_image", "DepthMap", "FusedCloud", "LayeredPair", "RectifiedPair",
            "box_mean", "depth_agreement", "depth_from_disparity", "depth_in_map", "depth_map_from_disparity",
            "disparity_plane_sweep", "disparity_range", "fuse_depth_maps", "left_right_check", "make_layered_pair",
            "make_textured_spheres", "merge_points", "rectify_pair", "ring_pairs", "scale_intrinsics",
-           "stereo_depth_map", "zncc", "zncc_volume", "TexturedScene", "make_textured_scene", "VertexTexture",
+           "stereo_depth_map", "zncc", "zncc_volume", "SphereScene", "make_textured_scene", "VertexTexture",
            "VertexViews", "edge_contrast", "held_out_error", "most_frontal_view", "render_depth", "texture_vertices",
            "vertex_views"]

@@ -41,10 +41,9 @@ from .surface import (
     silhouette_ious,
     surface_mesh,
 )
-from .synthetic import CarvingScene, make_snowman
 from .voxels import Carving, VoxelGrid, bounding_box_from_silhouettes, carve, inside_silhouette, project_with_depth
 
 __all__ = ["BackgroundModel", "background_model", "colour_distance", "silhouette", "clean_mask", "signed_distance_map",
            "mask_iou", "VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve",
            "bounding_box_from_silhouettes", "surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious",
-           "THRESHOLD_CANDIDATES", "choose_threshold", "CarvingScene", "make_snowman"]
+           "THRESHOLD_CANDIDATES", "choose_threshold"]

@@ -14,8 +14,8 @@ turn disparities into depth and 3D points, and fuse the depth maps of several pa
    ``Z = f b / d`` and back-projection; :func:`stereo_depth_map` does steps 2–4 for one pair.
 5. **Fusion** (:func:`fuse_depth_maps`): keep the points other depth maps confirm (:func:`depth_agreement`), merge
    duplicates on a grid (:func:`merge_points`); :func:`ring_pairs` chooses the pairs of a ring of views.
-6. **A synthetic scene with exact depth** (:func:`make_textured_spheres`, :func:`make_layered_pair`) for the tests
-   and the notebook's fallback.
+6. **A synthetic pair with exact disparities** (:func:`make_layered_pair`) for the tests; the textured spheres
+   with exact depth are :func:`labutils.model.make_textured_spheres`.
 
 References: Szeliski, *Computer Vision: Algorithms and Applications*, 2nd ed., ch. 12; Scharstein & Szeliski, "A
 taxonomy and evaluation of dense two-frame stereo correspondence algorithms", IJCV 2002; H&Z Sec. 11.12.
@@ -33,10 +33,9 @@ from .depth import (
 )
 from .disparity import as_grey, box_mean, disparity_plane_sweep, left_right_check, zncc, zncc_volume
 from .fusion import FusedCloud, depth_agreement, depth_in_map, fuse_depth_maps, merge_points
-from .synthetic import LayeredPair, SphereScene, make_layered_pair, make_textured_spheres
+from .synthetic import LayeredPair, make_layered_pair
 
 __all__ = ["as_grey", "box_mean", "zncc", "zncc_volume", "disparity_plane_sweep", "left_right_check",
            "RectifiedPair", "rectify_pair", "scale_intrinsics", "disparity_range", "depth_from_disparity", "DepthMap",
            "depth_map_from_disparity", "stereo_depth_map", "ring_pairs", "FusedCloud", "depth_in_map",
-           "depth_agreement", "merge_points", "fuse_depth_maps", "LayeredPair", "make_layered_pair", "SphereScene",
-           "make_textured_spheres"]
+           "depth_agreement", "merge_points", "fuse_depth_maps", "LayeredPair", "make_layered_pair"]
