@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..core.geometry import angle_axis_from_rotation, left_jacobian_so3, rotation_from_angle_axis
+from ..core.geometry import angle_axis_from_rotation, left_jacobian_so3, rotation_from_angle_axis, skew
 from ..core.lm import levenberg_marquardt
 from ..core.validation import as_image_size, as_points
 from .lens import INTRINSIC_NAMES, apply_distortion, as_intrinsics
@@ -192,12 +192,12 @@ class CalibrationProblem:
                 blocks.append((rows[sel], np.full(len(sel), cols[0]), dth[sel] @ self.A[c]))
             if c >= 1:
                 Jl = left_jacobian_so3(p[self.rig_cols[c][:3]][None])[0]
-                dw = -np.einsum("mij,jk->mik", _skew_rows(RY[sel]), Jl)        # ∂Xc/∂ω_c = -[R_c Y]× J_l(ω_c)
+                dw = -np.einsum("mij,jk->mik", skew(RY[sel]), Jl)        # ∂Xc/∂ω_c = -[R_c Y]× J_l(ω_c)
                 blocks.append((rows[sel], np.full(len(sel), self.rig_cols[c][0]),
                                np.concatenate([dXc[sel] @ dw, dXc[sel]], axis=2)))
         wv = np.stack([p[c[:3]] for c in self.view_cols])
         dXc_dY = dXc @ Rc[self.cam]                                 # ∂pixel/∂Y = ∂pixel/∂Xc · R_c
-        dw = -np.einsum("mij,mjk->mik", _skew_rows(RX), left_jacobian_so3(wv)[self.view])   # ∂Y/∂ω_v
+        dw = -np.einsum("mij,mjk->mik", skew(RX), left_jacobian_so3(wv)[self.view])   # ∂Y/∂ω_v
         col0 = np.array([vc[0] for vc in self.view_cols])[self.view]
         blocks.append((rows, col0, np.concatenate([dXc_dY @ dw, dXc_dY], axis=2)))
         ii, jj, vv = [], [], []
@@ -220,13 +220,6 @@ class CalibrationProblem:
     def residuals_and_jacobian(self, p):
         """Residuals and the Jacobian as a ``scipy.sparse`` CSR matrix (each row has at most q + 12 entries)."""
         return self._evaluate(np.asarray(p, float), jac=True)
-
-
-def _skew_rows(v):
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1),
-                     np.stack([v[:, 2], z, -v[:, 0]], -1),
-                     np.stack([-v[:, 1], v[:, 0], z], -1)], axis=1)
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -47,21 +47,36 @@ def dehomogeneous(x_h: ArrayLike) -> np.ndarray:
 
 
 def skew(v: ArrayLike) -> np.ndarray:
-    """The cross-product matrix ``[v]×`` with ``skew(v) @ w == np.cross(v, w)`` (H&Z A4.5).
+    """The cross-product matrix ``[v]×`` with ``skew(v) @ w == np.cross(v, w)`` (H&Z A4.5), of one vector or of each
+    row of a stack.
+
+    Parameters
+    ----------
+    v : (3,) or (N, 3) array_like
+
+    Returns
+    -------
+    (3, 3) or (N, 3, 3) ndarray
 
     >>> skew([1., 2., 3.]) @ np.array([4., 5., 6.])
     array([-3.,  6., -3.])
+    >>> skew(np.eye(3)).shape
+    (3, 3, 3)
     """
-    x, y, z = as_matrix(v, "v", (3,))
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    v = as_array(v, "v", "(3,) or (N, 3)")
+    if v.shape != (3,) and not (v.ndim == 2 and v.shape[1] == 3):
+        raise ValueError(f"v must have shape (3,) or (N, 3); got {v.shape}" + (" (transposed?)" if v.ndim == 2
+                                                                             and v.shape[0] == 3 else ""))
+    if not np.all(np.isfinite(v)):
+        raise ValueError("v must be finite (no NaN or inf)")
+    return _skew(v)
 
 
-def _skew_stack(v):
-    """``(n, 3) -> (n, 3, 3)`` cross-product matrices."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1),
-                     np.stack([v[:, 2], z, -v[:, 0]], -1),
-                     np.stack([-v[:, 1], v[:, 0], z], -1)], axis=1)
+def _skew(v):
+    """``[v]×`` without checks, for a (3,) vector or an (N, 3) stack (the loops inside the package)."""
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    o = np.zeros_like(x)
+    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
 
 
 def _aa_coefficients(theta):
@@ -117,7 +132,7 @@ def rotation_from_angle_axis(w: ArrayLike) -> np.ndarray:
         W = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
         return np.eye(3) + a * W + b * (W @ W)
     a, b, _ = _aa_coefficients(np.linalg.norm(w, axis=1))
-    W = _skew_stack(w)
+    W = _skew(w)
     return np.eye(3) + a[:, None, None] * W + b[:, None, None] * (W @ W)
 
 
@@ -194,7 +209,7 @@ def left_jacobian_so3(w: ArrayLike) -> np.ndarray:
     """
     w, single = _angle_axis_stack(w, "w")
     _, b, c = _aa_coefficients(np.linalg.norm(w, axis=1))
-    W = _skew_stack(w)
+    W = _skew(w)
     J = np.eye(3) + b[:, None, None] * W + c[:, None, None] * (W @ W)
     return J[0] if single else J
 
@@ -343,3 +358,21 @@ def depths(R: ArrayLike, t: ArrayLike, X: ArrayLike) -> np.ndarray:
     """
     X = as_points(X, "X", dim=3)
     return X @ as_rotation(R, "R")[2] + as_matrix(t, "t", (3,))[2]
+
+
+def pixels_and_depths(K: ArrayLike, R: ArrayLike, t: ArrayLike, X: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels ``(N, 2)`` and depths ``(N,)`` of world points in one camera ``K [R | t]``; NaN rows of ``X`` stay NaN,
+    and a point at depth 0 projects to inf.
+
+    >>> x, z = pixels_and_depths(np.eye(3), np.eye(3), np.zeros(3), [[2., 4., 2.], [np.nan] * 3])
+    >>> x.tolist(), z.tolist()
+    ([[1.0, 2.0], [nan, nan]], [2.0, nan])
+    """
+    K, R, t = as_matrix(K, "K", (3, 3)), as_rotation(R, "R"), as_matrix(t, "t", (3,))
+    X = as_array(X, "X", "(N, 3)")
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise ValueError(f"X must have shape (N, 3) (points as rows); got shape {X.shape}")
+    c = X @ R.T + t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = c @ K.T
+        return q[:, :2] / q[:, 2:], c[:, 2]

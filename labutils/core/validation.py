@@ -392,3 +392,62 @@ def as_mesh(vertices, faces, allow_empty=False):
     if F.min() < 0 or F.max() >= len(V):
         raise ValueError(f"faces hold vertex indices 0..{len(V) - 1}; got {int(F.min())}..{int(F.max())}")
     return V, F.astype(np.int64)
+
+
+def as_cameras(K, R, t):
+    """Cameras of V views, some possibly not registered: ``(Ks (V, 3, 3), R (V, 3, 3), t (V, 3), registered (V,))``.
+
+    A view that is not registered has R and t entirely NaN (kept as NaN); every other pose must be a rotation and
+    a finite translation, and K one calibration or one per view.
+    """
+    R = as_array(R, "R", "(V, 3, 3)")
+    t = as_array(t, "t", "(V, 3)")
+    if R.ndim != 3 or R.shape[1:] != (3, 3):
+        raise ValueError(f"R must have shape (V, 3, 3); got shape {R.shape}")
+    if t.shape != (len(R), 3):
+        hint = " — transposed?" if t.shape == (3, len(R)) else ""
+        raise ValueError(f"t must have shape ({len(R)}, 3) (one translation per row, to match R); got shape "
+                         f"{t.shape}{hint}")
+    registered = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
+    partial = ~registered & (np.any(np.isfinite(R), axis=(1, 2)) | np.any(np.isfinite(t), axis=1))
+    if partial.any():
+        raise ValueError(f"view {int(np.flatnonzero(partial)[0])} has a partly NaN pose: a view that is not "
+                         "registered has R and t entirely NaN")
+    if np.isinf(R).any() or np.isinf(t).any():
+        raise ValueError("R and t must be finite (NaN rows mark views that are not registered); got inf")
+    if not registered.any():
+        raise ValueError("no view has a finite pose (R and t are all NaN)")
+    as_rotations(R[registered], "R")
+    as_translations(t[registered], "t")
+    Ks = as_calibration(K, "K", n_views=len(R))
+    return Ks, R, t, registered
+
+
+def as_visibility(visible, n_views, n_points, registered, name="visible", views="R", points="X"):
+    """A ``(n_views, n_points)`` boolean mask of which view sees which point; a view that is not registered sees
+    none."""
+    try:
+        vis = np.asarray(visible)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be a ({n_views}, {n_points}) boolean mask: {exc}") from None
+    if vis.shape != (n_views, n_points):
+        hint = " — transposed? it is (views, points)" if vis.shape == (n_points, n_views) else ""
+        raise ValueError(f"{name} must have shape ({n_views}, {n_points}) (one row per view of {views}, one column "
+                         f"per point of {points}); got shape {vis.shape}{hint}")
+    if vis.dtype != bool:
+        raise ValueError(f"{name} must be a boolean mask; got dtype {vis.dtype}")
+    ghost = vis[~registered].any(axis=1)
+    if ghost.any():
+        raise ValueError(f"{name}: view {int(np.flatnonzero(~registered)[ghost][0])} is not registered (NaN pose) "
+                         "but sees points")
+    return vis
+
+
+def as_image(image, name):
+    """An ``(H, W)`` or ``(H, W, 1 | 3 | 4)`` numeric image, at least 2×2."""
+    img = np.asarray(image)
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)) or min(img.shape[:2]) < 2:
+        raise ValueError(f"{name} must be an (H, W) or (H, W, 3) image; got shape {img.shape}")
+    if img.dtype.kind not in "uif":
+        raise ValueError(f"{name} must be numeric; got dtype {img.dtype}")
+    return img

@@ -16,7 +16,7 @@ from ..bundle.reprojection import (
     reprojection_residuals,
 )
 from ..bundle.schur import schur_step as _library_schur_step
-from ..core.geometry import left_jacobian_so3, rotation_from_angle_axis
+from ..core.geometry import left_jacobian_so3, rotation_from_angle_axis, skew
 from ..core.scene import observations
 from ..core.synthetic import DEFAULT_K, make_scene
 from .runner import run_checks
@@ -48,11 +48,6 @@ def _problem(seed, n_points=10, n_views=3, K=DEFAULT_K, rot_scale=None, spread=0
 # ---------------------------------------------------------------------------------------------------------------
 
 
-def _skew_stack(a):
-    """``[a]×`` for each row of ``a`` (n, 3) -> (n, 3, 3)."""
-    return np.cross(np.eye(3), a[:, None, :])
-
-
 def _jacobian_parts(cp, X, ci, pi, K):
     """The pieces of the chain rule per observation: R, RX, P, du/dP (and its variants), J_l."""
     w = cp[ci, :3]
@@ -69,7 +64,7 @@ def _jacobian_parts(cp, X, ci, pi, K):
 def _jacobian_variants(parts, K):
     """Typical wrong (Jc, Jp), each with its hint."""
     R, RX, P, dn, du, Jl = (parts[k] for k in ("R", "RX", "P", "dn", "du", "Jl"))
-    rot = -du @ _skew_stack(RX)
+    rot = -du @ skew(RX)
     out = []
 
     def jc(rot_block, trans_block=du):
@@ -82,26 +77,26 @@ def _jacobian_variants(parts, K):
                 "you used the right Jacobian J_r(ω) = J_l(ω)ᵀ: changing ω rotates the camera on the left, "
                 "∂P/∂ω = -[RX]× J_l(ω)"))
     out.append((jc(-rot @ Jl), du @ R, "the rotation block has the wrong sign: ∂(RX)/∂ω = -[RX]× J_l(ω)"))
-    out.append((jc(-du @ _skew_stack(parts["X"]) @ Jl), du @ R,
+    out.append((jc(-du @ skew(parts["X"]) @ Jl), du @ R,
                 "the rotation block uses [X]×: it is [R X]× (the point rotated into the camera), -[RX]× J_l(ω)"))
-    out.append((jc(-du @ _skew_stack(P) @ Jl), du @ R,
+    out.append((jc(-du @ skew(P) @ Jl), du @ R,
                 "the rotation block uses [RX + t]×: t does not rotate, so it is -[R X]× J_l(ω)"))
-    out.append((np.concatenate([du, -du @ _skew_stack(RX) @ Jl], axis=2), du @ R,
+    out.append((np.concatenate([du, -du @ skew(RX) @ Jl], axis=2), du @ R,
                 "the camera columns are in the wrong order: ω first (columns 0-2), then t (columns 3-5)"))
     out.append((jc(rot @ Jl), du,
                 "∂P/∂X = R: the point block is ∂u/∂P @ R, not ∂u/∂P"))
     out.append((jc(rot @ Jl), -du @ R, "the point block has the wrong sign: ∂u/∂X = ∂u/∂P @ R"))
-    dn_only = jc(-dn @ _skew_stack(RX) @ Jl, dn), dn @ R
+    dn_only = jc(-dn @ skew(RX) @ Jl, dn), dn @ R
     out.append((*dn_only, "∂u/∂P is missing K: u = K[:2, :2] (P1/P3, P2/P3) + K[:2, 2], so ∂u/∂P = K[:2, :2] @ "
                           "[[1/z, 0, -x/z²], [0, 1/z, -y/z²]]"))
     Kd = np.diag(np.diag(K[:2, :2]))
     dud = Kd @ dn
-    out.append((jc(-dud @ _skew_stack(RX) @ Jl, dud), dud @ R,
+    out.append((jc(-dud @ skew(RX) @ Jl, dud), dud @ R,
                 "K's skew K[0, 1] is missing: use the full 2×2 block K[:2, :2], not only fx and fy"))
     dn1 = dn.copy()
     dn1[:, :, 2] = -P[:, :2] / P[:, 2:3]
     du1 = K[:2, :2] @ dn1
-    out.append((jc(-du1 @ _skew_stack(RX) @ Jl, du1), du1 @ R,
+    out.append((jc(-du1 @ skew(RX) @ Jl, du1), du1 @ R,
                 "the z column of ∂(x/z, y/z)/∂P is -x/z², -y/z² (you have -x/z, -y/z)"))
     return out
 

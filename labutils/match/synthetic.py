@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..core.synthetic import look_at
 from ..core.validation import as_points, as_rng
 
 __all__ = ["RenderedScene", "render_corner", "blob_texture", "look_at"]
@@ -25,24 +26,6 @@ CORNER_FACES = (
     (np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])),   # wall y = 0
     (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, -1.0])),   # wall x = 0
 )
-
-
-def look_at(C: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation and translation of a camera at ``C`` looking at ``target`` (x right, y down, z forward).
-
-    >>> R, t = look_at([0.0, -5.0, 0.0], [0.0, 0.0, 0.0])
-    >>> (R @ [0.0, 0.0, 0.0] + t).round(9) + 0.0               # the target is straight ahead
-    array([0., 0., 5.])
-    """
-    C, target, up = (np.asarray(v, float) for v in (C, target, up))
-    z = target - C
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    if np.linalg.norm(x) < 1e-9:
-        raise ValueError("the viewing direction is parallel to 'up': choose another up vector")
-    x /= np.linalg.norm(x)
-    R = np.stack([x, np.cross(z, x), z])
-    return R, -R @ C
 
 
 def blob_texture(size: int, *, rng: np.random.Generator, n_blobs: int = 400,

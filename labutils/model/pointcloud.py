@@ -31,8 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
-from ..core.geometry import camera_center
-from ..core.validation import as_array, as_calibration, as_count, as_points, as_rotations, as_translations
+from ..core.geometry import camera_center, pixels_and_depths
+from ..core.validation import as_cameras, as_count, as_image, as_points, as_visibility
 from ..data.ply import write_points
 
 __all__ = ["LocalPCA", "PointCloud", "local_pca", "estimate_normals", "orient_normals", "facing_fractions",
@@ -42,49 +42,6 @@ __all__ = ["LocalPCA", "PointCloud", "local_pca", "estimate_normals", "orient_no
 # --------------------------------------------------------------------------------------------------------------
 # Input checks
 # --------------------------------------------------------------------------------------------------------------
-def _as_cameras(K, R, t):
-    """(Ks (V, 3, 3), R (V, 3, 3), t (V, 3), registered (V,)): NaN poses (unregistered views) kept as NaN."""
-    R = as_array(R, "R", "(V, 3, 3)")
-    t = as_array(t, "t", "(V, 3)")
-    if R.ndim != 3 or R.shape[1:] != (3, 3):
-        raise ValueError(f"R must have shape (V, 3, 3); got shape {R.shape}")
-    if t.shape != (len(R), 3):
-        hint = " — transposed?" if t.shape == (3, len(R)) else ""
-        raise ValueError(f"t must have shape ({len(R)}, 3) (one translation per row, to match R); got shape "
-                         f"{t.shape}{hint}")
-    registered = np.all(np.isfinite(R), axis=(1, 2)) & np.all(np.isfinite(t), axis=1)
-    partial = ~registered & (np.any(np.isfinite(R), axis=(1, 2)) | np.any(np.isfinite(t), axis=1))
-    if partial.any():
-        raise ValueError(f"view {int(np.flatnonzero(partial)[0])} has a partly NaN pose: a view that is not "
-                         "registered has R and t entirely NaN")
-    if np.isinf(R).any() or np.isinf(t).any():
-        raise ValueError("R and t must be finite (NaN rows mark views that are not registered); got inf")
-    if not registered.any():
-        raise ValueError("no view has a finite pose (R and t are all NaN)")
-    as_rotations(R[registered], "R")
-    as_translations(t[registered], "t")
-    Ks = as_calibration(K, "K", n_views=len(R))
-    return Ks, R, t, registered
-
-
-def _as_visible(visible, n_views, n_points, registered, name="visible", views="R", points="X"):
-    try:
-        vis = np.asarray(visible)
-    except ValueError as exc:
-        raise ValueError(f"{name} must be a ({n_views}, {n_points}) boolean mask: {exc}") from None
-    if vis.shape != (n_views, n_points):
-        hint = " — transposed? it is (views, points)" if vis.shape == (n_points, n_views) else ""
-        raise ValueError(f"{name} must have shape ({n_views}, {n_points}) (one row per view of {views}, one column "
-                         f"per point of {points}); got shape {vis.shape}{hint}")
-    if vis.dtype != bool:
-        raise ValueError(f"{name} must be a boolean mask; got dtype {vis.dtype}")
-    ghost = vis[~registered].any(axis=1)
-    if ghost.any():
-        raise ValueError(f"{name}: view {int(np.flatnonzero(~registered)[ghost][0])} is not registered (NaN pose) "
-                         "but sees points")
-    return vis
-
-
 # --------------------------------------------------------------------------------------------------------------
 # Normals
 # --------------------------------------------------------------------------------------------------------------
@@ -229,8 +186,8 @@ def orient_normals(X: ArrayLike, normals: ArrayLike, R: ArrayLike, t: ArrayLike,
     if np.any(np.abs(length - 1) > 1e-6):
         i = int(np.flatnonzero(np.abs(length - 1) > 1e-6)[0])
         raise ValueError(f"normals must be unit vectors; normals[{i}] has length {length[i]:.6g}")
-    _, R, t, registered = _as_cameras(np.eye(3), R, t)
-    visible = _as_visible(visible, len(R), len(X), registered)
+    _, R, t, registered = as_cameras(np.eye(3), R, t)
+    visible = as_visibility(visible, len(R), len(X), registered)
     unseen = ~visible.any(axis=0)
     if unseen.any():
         raise ValueError(f"point {int(np.flatnonzero(unseen)[0])} is seen by no view ({int(unseen.sum())} such "
@@ -260,8 +217,8 @@ def facing_fractions(X: ArrayLike, normals: ArrayLike, R: ArrayLike, t: ArrayLik
     """
     X = as_points(X, "X", dim=3)
     normals = as_points(normals, "normals", dim=3, like=(X, "X"))
-    _, R, t, registered = _as_cameras(np.eye(3), R, t)
-    visible = _as_visible(visible, len(R), len(X), registered)
+    _, R, t, registered = as_cameras(np.eye(3), R, t)
+    visible = as_visibility(visible, len(R), len(X), registered)
     seen = visible.any(axis=0)
     if not seen.any():
         raise ValueError("no point is seen by any view")
@@ -275,15 +232,6 @@ def facing_fractions(X: ArrayLike, normals: ArrayLike, R: ArrayLike, t: ArrayLik
 # --------------------------------------------------------------------------------------------------------------
 # Colours
 # --------------------------------------------------------------------------------------------------------------
-def _as_image(image, name):
-    img = np.asarray(image)
-    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)) or min(img.shape[:2]) < 2:
-        raise ValueError(f"{name} must be an (H, W) or (H, W, 3) image; got shape {img.shape}")
-    if img.dtype.kind not in "uif":
-        raise ValueError(f"{name} must be numeric; got dtype {img.dtype}")
-    return img
-
-
 def sample_image(image: ArrayLike, x: ArrayLike) -> np.ndarray:
     """Bilinear samples of an image at pixels ``x`` (x right, y down; pixel ``image[r, c]`` centred on ``(c, r)``).
 
@@ -306,7 +254,7 @@ def sample_image(image: ArrayLike, x: ArrayLike) -> np.ndarray:
            [10.],
            [nan]])
     """
-    img = _as_image(image, "image")
+    img = as_image(image, "image")
     img = img[:, :, None] if img.ndim == 2 else img
     x = as_points(x, "x", min_n=0)
     h, w = img.shape[:2]
@@ -321,14 +269,6 @@ def sample_image(image: ArrayLike, x: ArrayLike) -> np.ndarray:
     out = (1 - fv) * ((1 - fu) * f00 + fu * f01) + fv * ((1 - fu) * f10 + fu * f11)
     out[~inside] = np.nan
     return out
-
-
-def _project(K, R, t, X):
-    """Pixels (N, 2) and depths (N,) of X in one camera."""
-    c = X @ R.T + t
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = c @ K.T
-        return q[:, :2] / q[:, 2:], c[:, 2]
 
 
 def point_colors(X: ArrayLike, images: Sequence, K: ArrayLike, R: ArrayLike, t: ArrayLike,
@@ -364,8 +304,8 @@ def point_colors(X: ArrayLike, images: Sequence, K: ArrayLike, R: ArrayLike, t: 
     array([[200,   0,   0]], dtype=uint8)
     """
     X = as_points(X, "X", dim=3)
-    Ks, R, t, registered = _as_cameras(K, R, t)
-    visible = _as_visible(visible, len(R), len(X), registered)
+    Ks, R, t, registered = as_cameras(K, R, t)
+    visible = as_visibility(visible, len(R), len(X), registered)
     images = list(images)
     if len(images) != len(R):
         raise ValueError(f"images has {len(images)} entries for {len(R)} views: give one per view (None to skip)")
@@ -373,11 +313,11 @@ def point_colors(X: ArrayLike, images: Sequence, K: ArrayLike, R: ArrayLike, t: 
     for v in np.flatnonzero(visible.any(axis=1)):
         if images[v] is None:
             continue
-        img = _as_image(images[v], f"images[{v}]")
+        img = as_image(images[v], f"images[{v}]")
         if img.ndim != 3 or img.shape[2] < 3:
             raise ValueError(f"images[{v}] must be an RGB image (H, W, 3); got shape {img.shape}")
         idx = np.flatnonzero(visible[v])
-        x, depth = _project(Ks[v], R[v], t[v], X[idx])
+        x, depth = pixels_and_depths(Ks[v], R[v], t[v], X[idx])
         if np.any(depth <= 0):
             raise ValueError(f"point {int(idx[np.argmax(depth <= 0)])} is marked visible in view {v} but lies behind "
                              "its camera")
@@ -469,7 +409,7 @@ def oriented_point_cloud(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike,
     (True, True)
     """
     X = as_points(X, "X", dim=3)
-    _as_cameras(K, R, t)
+    as_cameras(K, R, t)
     normals = orient_normals(X, estimate_normals(X, k=k), R, t, visible)
     colors = None if images is None else point_colors(X, images, K, R, t, visible)
     return PointCloud(X, normals, colors, np.asarray(visible, bool).copy(), np.arange(len(X)))

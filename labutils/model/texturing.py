@@ -21,10 +21,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.geometry import camera_center
-from ..core.validation import as_array, as_image_size, as_mesh, as_points, as_positive
+from ..core.geometry import camera_center, pixels_and_depths
+from ..core.validation import (
+    as_array,
+    as_cameras,
+    as_image,
+    as_image_size,
+    as_mesh,
+    as_points,
+    as_positive,
+    as_visibility,
+)
 from .meshing import vertex_normals
-from .pointcloud import _as_cameras, _as_image, _as_visible, _project, sample_image
+from .pointcloud import sample_image
 
 __all__ = ["render_depth", "VertexViews", "vertex_views", "most_frontal_view", "VertexTexture", "texture_vertices",
            "held_out_error", "edge_contrast"]
@@ -78,9 +87,9 @@ def render_depth(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
         raise ValueError(f"R must have shape (3, 3) and t shape (3,) (one view); got {R.shape} and {t.shape}")
     if not (np.isfinite(R).all() and np.isfinite(t).all()):
         raise ValueError("R and t must be finite (one registered view)")
-    Ks, Rs, ts, _ = _as_cameras(K, R[None], t[None])
+    Ks, Rs, ts, _ = as_cameras(K, R[None], t[None])
     w, h = as_image_size(image_size)
-    x, z = _project(Ks[0], Rs[0], ts[0], V)
+    x, z = pixels_and_depths(Ks[0], Rs[0], ts[0], V)
     if np.any(z[F] <= 0):
         raise ValueError("a vertex of the mesh is at or behind the camera's plane: render_depth needs the whole mesh "
                          "in front of the camera")
@@ -207,7 +216,7 @@ def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     (np.True_, [50.0, 50.0, 50.0])
     """
     V, F = as_mesh(vertices, faces)
-    Ks, R, t, registered = _as_cameras(K, R, t)
+    Ks, R, t, registered = as_cameras(K, R, t)
     images = list(images)
     if len(images) != len(R):
         raise ValueError(f"images has {len(images)} entries for {len(R)} views: give one per view (None to skip)")
@@ -237,11 +246,11 @@ def vertex_views(vertices: ArrayLike, faces: ArrayLike, K: ArrayLike, R: ArrayLi
     for v in np.flatnonzero(registered):
         if images[v] is None:
             continue
-        img = _as_image(images[v], f"images[{v}]")
+        img = as_image(images[v], f"images[{v}]")
         if img.ndim != 3 or img.shape[2] < 3:
             raise ValueError(f"images[{v}] must be an RGB image (H, W, 3); got shape {img.shape}")
         h, w = img.shape[:2]
-        x, z = _project(Ks[v], R[v], t[v], V)
+        x, z = pixels_and_depths(Ks[v], R[v], t[v], V)
         col, row = np.floor(x[:, 0] + 0.5), np.floor(x[:, 1] + 0.5)
         ok = (z > 0) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
         inside[v] = ok
@@ -290,7 +299,7 @@ def most_frontal_view(X: ArrayLike, normals: ArrayLike, C: ArrayLike, visible: A
     registered = np.all(np.isfinite(C), axis=1)
     if np.isinf(C).any() or (np.isnan(C).any(axis=1) & ~np.isnan(C).all(axis=1)).any():
         raise ValueError("C must be finite (a row entirely NaN marks a view that is not registered)")
-    visible = _as_visible(visible, len(C), len(X), registered, views="C")
+    visible = as_visibility(visible, len(C), len(X), registered, views="C")
     d = np.where(registered[:, None, None], C[:, None, :], 0.0) - X[None]
     cos = np.einsum("vni,ni->vn", d, normals) / np.maximum(np.linalg.norm(d, axis=-1), np.finfo(float).tiny)
     best = np.argmax(np.where(visible, cos, -np.inf), axis=0)

@@ -49,12 +49,12 @@ from .global_sfm import global_sfm
 from .initial_pair import two_view_reconstruction
 from .reconstruction import Reconstruction, masked_reprojection_errors
 from .view_selection import (  # noqa: F401 (covisibility, next_view: public here too)
-    _pair,
     as_scores,
     as_strategy,
     choose_initial_pair,
     covisibility,
     next_view,
+    shared_observations,
 )
 
 # ---------------------------------------------------------------------------------------------
@@ -314,7 +314,7 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
         i, j = (int(v) for v in init_pair)
         if not (0 <= i < V and 0 <= j < V and i != j):
             raise ValueError(f"init_pair must be two different views in 0..{V - 1}; got {init_pair}")
-        x1, x2, idx = _pair(tracks, i, j)
+        x1, x2, idx = shared_observations(tracks, i, j)
         if len(idx) < 8:
             raise ValueError(f"views {i} and {j} share {len(idx)} tracks; at least 8 are needed to start")
         R, t, X, med = two_view_reconstruction(x1, x2, Ks[i], Ks[j], rng=rng, threshold_px=threshold_px,

@@ -335,7 +335,7 @@ def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     order = np.argsort(-cov[i, j], kind="stable")[:n_candidates]
     table, results = [], []
     for a, b in zip(i[order], j[order]):
-        x1, x2, idx = _pair(tracks, a, b)
+        x1, x2, idx = shared_observations(tracks, a, b)
         try:
             R, t, X, med = two_view_reconstruction(x1, x2, Ks[a], Ks[b], rng=rng, threshold_px=threshold_px,
                                                    confidence=confidence)
@@ -358,7 +358,8 @@ def choose_initial_pair(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     return results[best], table
 
 
-def _pair(tracks, i, j):
+def shared_observations(tracks, i, j):
+    """The pixels ``(N, 2)`` of views i and j of the tracks both see, and those tracks' indices ``(N,)``."""
     both = np.all(np.isfinite(tracks[i]), axis=-1) & np.all(np.isfinite(tracks[j]), axis=-1)
     idx = np.flatnonzero(both)
     return tracks[i, idx], tracks[j, idx], idx
