@@ -115,3 +115,11 @@ def test_notebooks_names_the_cell_that_raises(tmp_path):
                        text=True, cwd=tmp_path)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.strip().splitlines()[-1] == f"error: {nb}: cell 1 raised ZeroDivisionError: division by zero"
+
+
+def test_notebooks_default_to_the_workbook_s_notebooks():
+    """Without paths, ``bench notebooks`` times the notebooks of this checkout (it timed none when the package's
+    layout moved and the folder was looked for one level too high)."""
+    from labutils.tools.bench import NOTEBOOK_DIR
+    assert NOTEBOOK_DIR == Path(__file__).resolve().parents[1] / "notebooks"
+    assert len(list(NOTEBOOK_DIR.glob("[0-9][0-9]_*.ipynb"))) >= 15

@@ -276,7 +276,7 @@ def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
 
 
 NOTEBOOK_BUDGET_S = 90.0          # each notebook under nbval, on the 2-core CI machine (the developers' guide)
-NOTEBOOK_DIR = Path(__file__).resolve().parent.parent / "notebooks"
+NOTEBOOK_DIR = Path(__file__).resolve().parents[2] / "notebooks"
 
 
 def _cell_seconds(cell):
