@@ -21,12 +21,15 @@ lives in the stage package of its idea (``labutils.twoview``, ``labutils.sfm``, 
 References: Hartley & Zisserman, *Multiple View Geometry*, 2nd ed. (cited as H&Z).
 """
 import importlib
+import os
 import sys
 
 
 def _interrupted_while_loading(signum, frame):
+    # exit at once: an exception raised here could surface inside a C extension's import (numpy's) as another error;
+    # nothing has been written yet, so there is nothing to clean up
     print("error: interrupted", file=sys.stderr, flush=True)
-    raise SystemExit(130)
+    os._exit(130)
 
 
 # ``python -m labutils.<command>``: a Ctrl-C while the command still imports numpy, scipy, OpenCV is one line and exit

@@ -435,7 +435,8 @@ def main(argv=None):
     out = _cli.check_output_path(args.out)
     problem = read_bal(args.problem)
     try:
-        with contextlib.redirect_stdout(sys.stderr):        # scipy's verbose output goes to stdout: keep it clean
+        # scipy's verbose output goes to stdout: keep it clean; an overflow is not a warning here but the error below
+        with contextlib.redirect_stdout(sys.stderr), np.errstate(over="ignore", invalid="ignore"):
             solved, res = solve_bal(problem, solver=args.solver, fix_intrinsics=args.fix_intrinsics, loss=args.loss,
                                     f_scale=args.f_scale, gauge=None if args.gauge == "none" else args.gauge,
                                     max_iter=args.max_iter, tol=args.tol, verbose=args.verbose)
