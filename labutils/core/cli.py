@@ -8,10 +8,10 @@ exit status 2 — never a traceback.
 
 A Ctrl-C is one line, ``error: interrupted``, with exit status 130 (128 + SIGINT, what a shell reports for a
 command that SIGINT stopped, so that a script can tell an interruption from a failure), and nothing half-written:
-every output goes to a temporary file that is removed. That holds from the first moment: while
-``python -m labutils.<command>`` is still importing numpy and scipy, the handler that ``labutils/__init__.py``
-installs for ``-m`` runs says the same and exits; :func:`run` then hands Ctrl-C back to Python as
-``KeyboardInterrupt`` and reports it.
+every output goes to a temporary file that is removed. That holds while ``python -m labutils.<command>`` is still
+importing numpy and scipy: the handler that ``labutils/__init__.py`` installs for ``-m`` runs says the same and
+exits (only Python's own start-up, its first few hundredths of a second, comes before it); :func:`run` then hands
+Ctrl-C back to Python as ``KeyboardInterrupt`` and reports it.
 """
 import argparse
 import os
