@@ -162,6 +162,7 @@ def inputs(tracks_and_K, bal_problem):
     d = tracks_and_K
     os.replace(bal_problem, d / "p.txt")
     (d / "par.txt").write_text("1\nimg.png 1 0 0 0 1 0 0 0 1 1 0 0 0 1 0 0 0 1 0 0 5\n")
+    (d / "img.png").write_bytes(b"not really an image")
     (d / "imgs").mkdir()
     for name in ("a.png", "b.png"):
         (d / "imgs" / name).write_bytes(b"not really an image")
@@ -180,6 +181,8 @@ def inputs(tracks_and_K, bal_problem):
      "imgs/a.png: --ply is an input image"),
     ("bundle", ["p.txt", "--out", "p.txt"], "p.txt: --out is the input PROBLEM file"),
     ("carve", ["par.txt", "--out", "par.txt"], "par.txt: --out is the input PAR_FILE"),
+    ("carve", ["par.txt", "--out", "img.png"], "img.png: --out is an input image"),
+    ("carve", ["par.txt", "--out", "imgs/img_mask.png", "--masks", "imgs"], "a --masks file and --out name the same"),
     ("match", ["imgs", "K.txt", "--out", "K.txt"], "K.txt: --out is the input K file"),
     ("match", ["imgs", "K.txt", "--out", "imgs/b.png"], "imgs/b.png: --out is an input image"),
 ])
@@ -280,3 +283,13 @@ def test_ctrl_c_while_running_is_one_line_and_leaves_no_temporary_file(tmp_path,
 
     assert _cli.run(main) == 130
     assert capsys.readouterr().err == "error: interrupted\n" and list(tmp_path.iterdir()) == []
+
+
+def test_bench_keep_refuses_two_notebooks_of_one_name(tmp_path):
+    for d in ("n1", "n2", "keep"):
+        (tmp_path / d).mkdir()
+    for d in ("n1", "n2"):
+        (tmp_path / d / "x.ipynb").write_text("{}")
+    one_line_error(run("bench", "notebooks", "n1/x.ipynb", "n2/x.ipynb", "--keep", "keep", cwd=tmp_path, timeout=60),
+                   "keep/x.ipynb: --keep (for n2/x.ipynb) and --keep (for n1/x.ipynb) name the same file")
+    assert list((tmp_path / "keep").iterdir()) == []

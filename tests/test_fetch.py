@@ -26,7 +26,7 @@ import pytest
 
 from labutils.data import fetch as F
 from labutils.data import registry as D
-from labutils.data.paths import data_dirs
+from labutils.data.paths import COURSE_ONLY, data_dirs
 
 NAMES = ["dino", "fountain-P11", "templeRing", "chessboard", "bal"]
 PROJECT = Path(__file__).resolve().parents[1]
@@ -173,6 +173,7 @@ def test_registry_is_well_formed():
             assert s.kind in ("files", "bz2", "zip") and s.role in ("origin", "mirror"), s
             assert s.url.startswith("https://") and (s.kind != "zip" or s.member_prefix.endswith("/")), s
     assert not F.DATASETS["dino"].sources and "no public download" in F.DATASETS["dino"].note
+    assert COURSE_ONLY == tuple(n for n, ds in F.DATASETS.items() if not ds.sources)    # what paths.how_to_get says
     assert all(ds.sources for ds in F.DATASETS.values() if ds.name != "dino")
     assert sum(ds.n_bytes for ds in F.DATASETS.values()) == 72_857_186      # the sets total ~73 MB
 

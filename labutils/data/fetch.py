@@ -95,8 +95,8 @@ def fetch(name: str, target=None, *, base_url: str = None, progress: bool = True
     Files already there with the right sha256 are kept and not downloaded again; a file with the wrong size or
     sha256 is replaced. A download is written to a temporary file next to its destination and moved into place
     only once its sha256 matches: a partial or corrupt download never stays behind, nor does a corrupt old copy
-    when no source can replace it. Sources are tried in order (origin, then mirror); the first failure of a
-    source ends its turn and the next takes the remaining files.
+    when no source can replace it, nor a folder this call made and left empty. Sources are tried in order (origin,
+    then mirror); the first failure of a source ends its turn and the next takes the remaining files.
 
     Parameters
     ----------
@@ -116,8 +116,10 @@ def fetch(name: str, target=None, *, base_url: str = None, progress: bool = True
     Raises
     ------
     FetchError
-        One line naming the file: no source known, a download failed, a checksum did not match, the disk is
-        full, the target folder is missing or not writable. ``KeyError`` for an unknown name.
+        One line naming the file: no source known, a download failed (the reason in a phrase: the host did not
+        resolve, refused, timed out, answered an HTTP error), a checksum did not match, the disk is full, the target
+        folder is missing or not writable. Its ``unresolved`` is True when every source failed because no host name
+        resolved. ``KeyError`` for an unknown name.
     """
     ds = dataset(name)
     folder = check_target(default_target() if target is None else target) / ds.name
