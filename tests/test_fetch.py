@@ -406,3 +406,19 @@ def test_data_entry_point_has_no_runpy_warning(tmp_path):
     proc = run_cli("fetch", "dinosaur", data=tmp_path)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
 
+
+
+def test_a_ctrl_c_mid_fetch_leaves_no_folder(tmp_path, monkeypatch):
+    """The folders a fetch made are removed when it stops, by a failure or by Ctrl-C (``KeyboardInterrupt``, which
+    the command line reports on one line with exit status 130)."""
+    def interrupted(src, folder, todo, bar):
+        (folder / "gt_dense_cameras").mkdir(parents=True)
+        raise KeyboardInterrupt
+    monkeypatch.setitem(F._FETCHERS, "files", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        F.fetch("fountain-P11", tmp_path, base_url="http://nonexistent.invalid/", progress=False)
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "fountain-P11").mkdir()                  # a folder that was there before stays
+    with pytest.raises(KeyboardInterrupt):
+        F.fetch("fountain-P11", tmp_path, base_url="http://nonexistent.invalid/", progress=False)
+    assert [p.name for p in tmp_path.rglob("*")] == ["fountain-P11"]

@@ -480,8 +480,9 @@ def main(argv=None) -> int:
     leaves nothing behind: no partial file, no folder made for it. ``fetch all`` skips, with a note, the sets
     that have no public download unless ``$LABUTILS_DATA_URL`` is set; naming such a set is an error.
 
-    Exit status 0 on success; 2 when an argument is wrong or a data set could not be laid out; 130 after a
-    Ctrl-C (one line, and no partial file kept).
+    Exit status 0 on success; 2 when an argument is wrong or a data set could not be laid out. A Ctrl-C raises
+    ``KeyboardInterrupt`` (no partial file and no folder made for the set is kept), which the command line,
+    :func:`labutils.core.cli.run`, reports on one line with exit status 130.
     """
     names = list(DATASETS)
     parser = _Parser(prog="python -m labutils.data",
@@ -512,14 +513,10 @@ def main(argv=None) -> int:
         choices = ", ".join(names + (["all"] if args.command == "fetch" else []))
         print(f"error: unknown data set {unknown[0]!r}; choose from {choices}", file=sys.stderr)
         return 2
-    try:
-        if args.command == "list":
-            return _list(args.names or names, args.files)
-        explicit = "all" not in args.names
-        return _fetch(names if not explicit else list(dict.fromkeys(args.names)), explicit, args.force)
-    except KeyboardInterrupt:
-        print("error: interrupted (no partial file was kept)", file=sys.stderr)
-        return 130
+    if args.command == "list":
+        return _list(args.names or names, args.files)
+    explicit = "all" not in args.names
+    return _fetch(names if not explicit else list(dict.fromkeys(args.names)), explicit, args.force)
 
 
 if __name__ == "__main__":
