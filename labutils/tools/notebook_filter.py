@@ -24,8 +24,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..core import cli as _cli
-
 ROOT = Path(__file__).resolve().parents[2]
 EXTRA_KEYS = ["metadata.kernelspec", "metadata.language_info"]     # rewritten by JupyterLab on every save
 CLEAN_FLAGS = ["--keep-id"]
@@ -102,4 +100,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(_cli.run(main))
+    sys.exit(main())
