@@ -102,7 +102,8 @@ from .ex13_calibration import (
 from .runner import CaseResult, CheckReport, run_checks
 
 __all__ = ["CaseResult", "CheckReport", "run_checks", "yours", "check_eight_point", "check_gold_standard_residuals",
-           "check_normalisation_matrix", "check_sampson", "check_choose_pose", "check_four_poses", "check_triangulate_linear",
+           "check_normalisation_matrix", "check_sampson", "check_choose_pose", "check_four_poses",
+           "check_triangulate_linear",
            "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "check_projection_jacobian",
            "check_schur_step", "check_sparsity_mask", "accept_points_reference", "check_accept_points",
            "check_choose_next_view", "next_view_reference", "check_cramer_rao_pose", "check_nees",
