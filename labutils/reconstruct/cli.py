@@ -130,7 +130,8 @@ def main(argv=None):
         raise _cli.CommandError(f"{folder}: cannot reconstruct: {exc}") from None
     seconds = time.perf_counter() - t0
     result = {"images": rec.names, "cameras": rec.cameras(), "points": np.round(rec.X, 9).tolist(),
-              "colors": rec.colors.tolist(), "focal": {k: float(v) for k, v in rec.focal.items()},
+              "colors": rec.colors.tolist(),
+              "focal": {k: v if isinstance(v, str) else float(v) for k, v in rec.focal.items()},
               "capture": rec.capture.problems}
     outputs = {args.out: json.dumps(result, indent=1) + "\n"}
     if args.report:

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.spatial.transform import Rotation
 
+from ..core.geometry import left_jacobian_so3, skew
 from ..core.validation import as_calibration, as_positive, as_rotations
 
 __all__ = ["SharedIntrinsics", "focal_from_fundamentals", "refine_shared_intrinsics"]
@@ -146,6 +147,43 @@ class _Problem:
         r2 = np.sum(xn ** 2, axis=1, keepdims=True)
         return f * xn * (1 + k1 * r2 + k2 * r2 ** 2) + self.c
 
+    def jacobian(self, p, refine_distortion=True):
+        """The residuals' Jacobian (in pixels), columns as :meth:`sparsity`; rotations by ``R0 exp([w]x)``:
+        ``∂(R0 exp([w]x) X)/∂w = -R0 [exp([w]x) X]x J_l(w)`` (:func:`labutils.core.geometry.left_jacobian_so3`)."""
+        V, M, ci, pi = self.V, self.M, self.ci, self.pi
+        f, k1, k2 = np.exp(p[0]), p[1], p[2]
+        w = p[3:3 + 3 * V].reshape(V, 3)
+        E = Rotation.from_rotvec(w).as_matrix()
+        R = self.R0 @ E
+        t = p[3 + 3 * V:3 + 6 * V].reshape(V, 3)
+        X = p[3 + 6 * V:].reshape(M, 3)
+        Xp = X[pi]
+        Y = np.einsum("nij,nj->ni", E[ci], Xp)                         # exp([w]x) X
+        Xc = np.einsum("nij,nj->ni", self.R0[ci], Y) + t[ci]
+        z = Xc[:, 2]
+        xn = Xc[:, :2] / z[:, None]
+        r2 = np.sum(xn ** 2, axis=1)
+        g = 1 + k1 * r2 + k2 * r2 ** 2
+        d_xn = f * (g[:, None, None] * np.eye(2) + 2 * (k1 + 2 * k2 * r2)[:, None, None]
+                    * xn[:, :, None] * xn[:, None, :])                # ∂u/∂xn (2, 2)
+        d_Xc = np.zeros((len(ci), 2, 3))
+        d_Xc[:, 0, 0] = d_Xc[:, 1, 1] = 1 / z
+        d_Xc[:, :, 2] = -xn / z[:, None]
+        A = d_xn @ d_Xc                                                # ∂u/∂Xc (2, 3)
+        Jl = left_jacobian_so3(w)[ci]
+        d_w = -A @ self.R0[ci] @ skew(Y) @ Jl
+        d_X = A @ R[ci]
+        d_in = np.stack([f * g[:, None] * xn, f * xn * r2[:, None], f * xn * (r2 ** 2)[:, None]], axis=2)
+        if not refine_distortion:
+            d_in[:, :, 1:] = 0.0
+        vals = np.concatenate([d_in, d_w, A, d_X], axis=2)              # (n, 2, 12)
+        cols = np.concatenate([np.tile(np.arange(3), (len(ci), 1)), 3 + 3 * ci[:, None] + np.arange(3),
+                               3 + 3 * V + 3 * ci[:, None] + np.arange(3), 3 + 6 * V + 3 * pi[:, None] + np.arange(3)],
+                              axis=1)
+        rows = np.repeat(np.arange(2 * len(ci)), 12)
+        return sp.csr_matrix((vals.reshape(-1), (rows, np.repeat(cols, 2, axis=0).reshape(-1))),
+                             shape=(2 * len(ci), 3 + 6 * V + 3 * M))
+
     def sparsity(self):
         n, V = len(self.ci), self.V
         rows = np.repeat(np.arange(2 * n), 1)
@@ -160,7 +198,7 @@ class _Problem:
 
 def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: ArrayLike, inliers: ArrayLike,
                              K0: ArrayLike, *, dist0: ArrayLike = (0.0, 0.0), f_prior: tuple = None,
-                             k_sigma: float = 0.5, max_nfev: int = 50, max_points: int | None = 1500,
+                             k_sigma: float = 0.5, max_nfev: int = 200, max_points: int | None = 400,
                              refine_distortion: bool = True) -> SharedIntrinsics:
     """Bundle adjustment with one focal length and radial distortion ``(k1, k2)`` shared by all views.
 
@@ -250,18 +288,15 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         prior = [(q[0] - np.log(f_centre)) / f_sigma] + [q[1] / k_sigma, q[2] / k_sigma][:n_k]
         return np.concatenate([r, prior])
 
-    S = prob.sparsity()
-    prior_rows = sp.lil_matrix((1 + n_k, S.shape[1]), dtype=bool)
-    for k in range(1 + n_k):
-        prior_rows[k, k] = True
-    S = sp.vstack([S, prior_rows.tocsr()]).tocsr()
-    if not refine_distortion:
-        S = S.tolil()
-        S[:, 1:3] = False
-        S = S.tocsr()
+    n_par = len(p0)
+    prior_jac = sp.csr_matrix((np.r_[1 / f_sigma, np.full(n_k, 1 / k_sigma)], (np.arange(1 + n_k),
+                               np.arange(1 + n_k))), shape=(1 + n_k, n_par))
+
+    def jacobian(p):
+        return sp.vstack([prob.jacobian(p, refine_distortion) / sigma, prior_jac]).tocsr()
     p = p0
     for _ in range(4):         # σ from the residuals at the current optimum, until it settles (within 2 %)
-        res = least_squares(residuals, p, jac_sparsity=S, method="trf", x_scale="jac", max_nfev=max_nfev,
+        res = least_squares(residuals, p, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_nfev,
                             ftol=1e-10, xtol=1e-10, tr_solver="lsmr")
         p = res.x
         q = p.copy()
@@ -271,7 +306,7 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         settled, sigma = abs(new / sigma - 1) < 0.02, new
         if settled:
             break
-    res = least_squares(residuals, p, jac_sparsity=S, method="trf", x_scale="jac", max_nfev=max_nfev,
+    res = least_squares(residuals, p, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_nfev,
                         ftol=1e-10, xtol=1e-10, tr_solver="lsmr") if not settled else res
     f, k1, k2, Rv, tv, Xv = prob.unpack(res.x)
     if not refine_distortion:
