@@ -15,8 +15,13 @@ from labutils.calibrate.lens import undistort_normalised
 from labutils.core import relative_pose
 from labutils.core.synthetic import make_scene
 from labutils.match.synthetic import render_corner
-from labutils.reconstruct import (capture_check, focal_from_exif, focal_from_fundamentals, refine_shared_intrinsics,
-                                  sharpness)
+from labutils.reconstruct import (
+    capture_check,
+    focal_from_exif,
+    focal_from_fundamentals,
+    refine_shared_intrinsics,
+    sharpness,
+)
 from labutils.twoview import fundamental_from_pose
 
 ROOT = Path(__file__).resolve().parents[1]
