@@ -11,10 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from labutils.calibrate.lens import undistort_normalised
 from labutils.core import relative_pose
 from labutils.core.synthetic import make_scene
-from labutils.match.synthetic import render_corner
 from labutils.reconstruct import (
     capture_check,
     focal_from_exif,
@@ -22,6 +20,7 @@ from labutils.reconstruct import (
     refine_shared_intrinsics,
     sharpness,
 )
+from labutils.reconstruct.synthetic import render_photo_folder
 from labutils.twoview import fundamental_from_pose
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -134,18 +133,8 @@ def test_capture_check_names_blur_few_features_and_views_to_reshoot():
     assert sharpness(blurred) < sharpness(sharp) / 3
 
 
-def _render_folder(folder, k1, n_views=6, size=(480, 360)):
-    s = render_corner(n_views, size, rng=np.random.default_rng(1), arc_deg=60, texture_px=768)
-    K = s.K
-    W, H = size
-    u, v = np.meshgrid(np.arange(W), np.arange(H))
-    xd = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1]], -1).reshape(-1, 2)
-    xu = undistort_normalised(xd, [k1, 0, 0, 0, 0])                 # the pixel u_d shows the point at distort⁻¹
-    mx = (xu[:, 0] * K[0, 0] + K[0, 2]).reshape(H, W).astype(np.float32)
-    my = (xu[:, 1] * K[1, 1] + K[1, 2]).reshape(H, W).astype(np.float32)
-    for i, img in enumerate(s.images):
-        cv2.imwrite(str(folder / f"{i:03d}.png"), cv2.remap(img, mx, my, cv2.INTER_LINEAR))
-    return s
+def _render_folder(folder, k1):
+    return render_photo_folder(folder, rng=np.random.default_rng(1), dist=(k1, 0.0))
 
 
 def _run(*args):

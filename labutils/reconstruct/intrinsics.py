@@ -104,8 +104,8 @@ class SharedIntrinsics:
     t : (V, 3) ndarray
     X : (T, 3) ndarray
         NaN rows stay NaN.
-    f_sd, k_sd : float, (2,) ndarray
-        Standard deviations (pixels; unitless), from the covariance at the optimum.
+    f_sd, k_sd, c_sd : float, (2,) ndarray, (2,) ndarray
+        Standard deviations (pixels; unitless; pixels), from the covariance at the optimum (0 for what was held).
     sigma_px : float
         The pixel noise, estimated robustly (the median residual length over 1.1774, Rayleigh's) at the optimum;
         the residuals are weighted by it, so that the priors pull with their stated strength.
@@ -122,43 +122,47 @@ class SharedIntrinsics:
     X: np.ndarray
     f_sd: float
     k_sd: np.ndarray
+    c_sd: np.ndarray
     sigma_px: float
     rms_px: tuple
     n_obs: int
     success: bool
 
 
+NI = 5          # shared parameters: log f, k1, k2, cx, cy
+
+
 class _Problem:
-    def __init__(self, x, ci, pi, R0, c, V, M):
-        self.x, self.ci, self.pi, self.R0, self.c, self.V, self.M = x, ci, pi, R0, c, V, M
+    def __init__(self, x, ci, pi, R0, V, M):
+        self.x, self.ci, self.pi, self.R0, self.V, self.M = x, ci, pi, R0, V, M
 
     def unpack(self, p):
         V, M = self.V, self.M
-        w = p[3:3 + 3 * V].reshape(V, 3)
-        t = p[3 + 3 * V:3 + 6 * V].reshape(V, 3)
-        X = p[3 + 6 * V:].reshape(M, 3)
+        w = p[NI:NI + 3 * V].reshape(V, 3)
+        t = p[NI + 3 * V:NI + 6 * V].reshape(V, 3)
+        X = p[NI + 6 * V:].reshape(M, 3)
         R = self.R0 @ Rotation.from_rotvec(w).as_matrix()       # R = R0 exp([w]x): no singularity near the start
-        return np.exp(p[0]), p[1], p[2], R, t, X
+        return np.exp(p[0]), p[1], p[2], p[3:5], R, t, X
 
     def project(self, p):
-        f, k1, k2, R, t, X = self.unpack(p)
+        f, k1, k2, c, R, t, X = self.unpack(p)
         Xc = np.einsum("nij,nj->ni", R[self.ci], X[self.pi]) + t[self.ci]
         xn = Xc[:, :2] / Xc[:, 2:3]
         r2 = np.sum(xn ** 2, axis=1, keepdims=True)
-        return f * xn * (1 + k1 * r2 + k2 * r2 ** 2) + self.c
+        return f * xn * (1 + k1 * r2 + k2 * r2 ** 2) + c
 
-    def jacobian(self, p, refine_distortion=True):
-        """The residuals' Jacobian (in pixels), columns as :meth:`sparsity`; rotations by ``R0 exp([w]x)``:
-        ``∂(R0 exp([w]x) X)/∂w = -R0 [exp([w]x) X]x J_l(w)`` (:func:`labutils.core.geometry.left_jacobian_so3`)."""
+    def jacobian(self, p, free):
+        """The residuals' Jacobian (in pixels); rotations by ``R0 exp([w]x)``:
+        ``∂(R0 exp([w]x) X)/∂w = -R0 [exp([w]x) X]x J_l(w)`` (:func:`labutils.core.geometry.left_jacobian_so3`).
+        ``free`` (NI,) bool: the columns of shared parameters held fixed are zero."""
         V, M, ci, pi = self.V, self.M, self.ci, self.pi
         f, k1, k2 = np.exp(p[0]), p[1], p[2]
-        w = p[3:3 + 3 * V].reshape(V, 3)
+        w = p[NI:NI + 3 * V].reshape(V, 3)
         E = Rotation.from_rotvec(w).as_matrix()
         R = self.R0 @ E
-        t = p[3 + 3 * V:3 + 6 * V].reshape(V, 3)
-        X = p[3 + 6 * V:].reshape(M, 3)
-        Xp = X[pi]
-        Y = np.einsum("nij,nj->ni", E[ci], Xp)                         # exp([w]x) X
+        t = p[NI + 3 * V:NI + 6 * V].reshape(V, 3)
+        X = p[NI + 6 * V:].reshape(M, 3)
+        Y = np.einsum("nij,nj->ni", E[ci], X[pi])                       # exp([w]x) X
         Xc = np.einsum("nij,nj->ni", self.R0[ci], Y) + t[ci]
         z = Xc[:, 2]
         xn = Xc[:, :2] / z[:, None]
@@ -170,37 +174,25 @@ class _Problem:
         d_Xc[:, 0, 0] = d_Xc[:, 1, 1] = 1 / z
         d_Xc[:, :, 2] = -xn / z[:, None]
         A = d_xn @ d_Xc                                                # ∂u/∂Xc (2, 3)
-        Jl = left_jacobian_so3(w)[ci]
-        d_w = -A @ self.R0[ci] @ skew(Y) @ Jl
+        d_w = -A @ self.R0[ci] @ skew(Y) @ left_jacobian_so3(w)[ci]
         d_X = A @ R[ci]
-        d_in = np.stack([f * g[:, None] * xn, f * xn * r2[:, None], f * xn * (r2 ** 2)[:, None]], axis=2)
-        if not refine_distortion:
-            d_in[:, :, 1:] = 0.0
-        vals = np.concatenate([d_in, d_w, A, d_X], axis=2)              # (n, 2, 12)
-        cols = np.concatenate([np.tile(np.arange(3), (len(ci), 1)), 3 + 3 * ci[:, None] + np.arange(3),
-                               3 + 3 * V + 3 * ci[:, None] + np.arange(3), 3 + 6 * V + 3 * pi[:, None] + np.arange(3)],
-                              axis=1)
-        rows = np.repeat(np.arange(2 * len(ci)), 12)
+        d_c = np.broadcast_to(np.eye(2), (len(ci), 2, 2))
+        d_in = np.concatenate([np.stack([f * g[:, None] * xn, f * xn * r2[:, None], f * xn * (r2 ** 2)[:, None]],
+                                        axis=2), d_c], axis=2) * free
+        vals = np.concatenate([d_in, d_w, A, d_X], axis=2)              # (n, 2, NI + 9)
+        cols = np.concatenate([np.tile(np.arange(NI), (len(ci), 1)), NI + 3 * ci[:, None] + np.arange(3),
+                               NI + 3 * V + 3 * ci[:, None] + np.arange(3),
+                               NI + 6 * V + 3 * pi[:, None] + np.arange(3)], axis=1)
+        rows = np.repeat(np.arange(2 * len(ci)), cols.shape[1])
         return sp.csr_matrix((vals.reshape(-1), (rows, np.repeat(cols, 2, axis=0).reshape(-1))),
-                             shape=(2 * len(ci), 3 + 6 * V + 3 * M))
-
-    def sparsity(self):
-        n, V = len(self.ci), self.V
-        rows = np.repeat(np.arange(2 * n), 1)
-        blocks = [np.tile(np.arange(3), (2 * n, 1))]                 # f, k1, k2: every residual
-        cam = 3 + np.concatenate([3 * self.ci[:, None] + np.arange(3), 3 * V + 3 * self.ci[:, None] + np.arange(3)], 1)
-        blocks.append(np.repeat(cam, 2, axis=0))
-        blocks.append(np.repeat(3 + 6 * V + 3 * self.pi[:, None] + np.arange(3), 2, axis=0))
-        cols = np.concatenate(blocks, axis=1)
-        rows = np.repeat(rows, cols.shape[1])
-        return sp.csr_matrix((np.ones(rows.size, bool), (rows, cols.ravel())), shape=(2 * n, 3 + 6 * V + 3 * self.M))
+                             shape=(2 * len(ci), NI + 6 * V + 3 * M))
 
 
 def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: ArrayLike, inliers: ArrayLike,
                              K0: ArrayLike, *, dist0: ArrayLike = (0.0, 0.0), f_prior: tuple = None,
-                             k_sigma: float = 0.5, max_nfev: int = 200, max_points: int | None = 400,
-                             refine_distortion: bool = True) -> SharedIntrinsics:
-    """Bundle adjustment with one focal length and radial distortion ``(k1, k2)`` shared by all views.
+                             k_sigma: float = 0.5, c_sigma: float | None = None, max_nfev: int = 200,
+                             max_points: int | None = 400, refine_distortion: bool = True) -> SharedIntrinsics:
+    """Bundle adjustment with one focal length, radial distortion ``(k1, k2)`` (and principal point) shared by all views.
 
     Parameters
     ----------
@@ -214,7 +206,7 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
     inliers : (V, T) bool array_like
         The observations used (registered view, triangulated point).
     K0 : (3, 3) array_like
-        Starting calibration: square pixels, no skew; the principal point stays fixed.
+        Starting calibration: square pixels, no skew.
     dist0 : (2,) array_like
         Starting ``(k1, k2)``.
     f_prior : (float, float), optional
@@ -227,6 +219,9 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         gives; the rest follow in a bundle adjustment with the camera fixed). ``X`` of the points left out is NaN.
     refine_distortion : bool
         False: ``k1 = k2 = 0`` held fixed (a pinhole camera, f refined alone).
+    c_sigma : float, optional
+        With it the principal point is refined too, with a Gaussian prior of this σ (pixels) around K0's; by
+        default it stays where K0 puts it.
 
     Returns
     -------
@@ -254,7 +249,7 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         raise ValueError("K0 must have square pixels and no skew (one focal length to refine)")
     views = np.flatnonzero(np.isfinite(R).all(axis=(1, 2)) & np.isfinite(t).all(axis=1) & inl.any(axis=1))
     pts = np.flatnonzero(np.isfinite(X).all(axis=1) & inl.any(axis=0))
-    if max_points is not None and len(pts) > max_points:      # the best-observed points: three intrinsics need few
+    if max_points is not None and len(pts) > max_points:      # the best-observed points: five intrinsics need few
         seen = inl[np.ix_(views, pts)].sum(axis=0)
         pts = np.sort(pts[np.argsort(-seen, kind="stable")[:max_points]])
     if len(views) < 2:
@@ -265,61 +260,65 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
     if len(ci) < 10:
         raise ValueError(f"{len(ci)} observations; at least 10 are needed")
     obs = x[views[ci], pts[pj]]
-    c = K0[:2, 2].copy()
     f0 = float(K0[0, 0])
     f_centre, f_sigma = (f0, 0.5) if f_prior is None else (as_positive(f_prior[0], "f_prior[0]"),
                                                           as_positive(f_prior[1], "f_prior[1]"))
     k_sigma = as_positive(k_sigma, "k_sigma")
-    prob = _Problem(obs, ci, pj, R[views], c, len(views), len(pts))
+    c_centre = K0[:2, 2].copy()
+    c_sigma = 0.0 if c_sigma is None else as_positive(c_sigma, "c_sigma", allow_zero=True)
     k0 = np.asarray(dist0, float)
     if k0.shape != (2,) or not np.all(np.isfinite(k0)):
         raise ValueError(f"dist0 must be 2 finite numbers (k1, k2); got {dist0!r}")
-    p0 = np.concatenate([[np.log(f0), *(k0 if refine_distortion else (0.0, 0.0))], np.zeros(3 * len(views)),
+    free = np.array([True, refine_distortion, refine_distortion, c_sigma > 0, c_sigma > 0])
+    centre = np.r_[np.log(f_centre), 0.0, 0.0, c_centre]
+    sigmas = np.r_[f_sigma, k_sigma, k_sigma, c_sigma, c_sigma]
+    prob = _Problem(obs, ci, pj, R[views], len(views), len(pts))
+    p0 = np.concatenate([[np.log(f0)], k0 if refine_distortion else (0.0, 0.0), c_centre, np.zeros(3 * len(views)),
                          t[views].ravel(), X[pts].ravel()])
+    fixed_values = p0[:NI].copy()
     r_start = np.linalg.norm(prob.project(p0) - obs, axis=1)
     sigma = max(float(np.median(r_start)) / RAYLEIGH_MEDIAN, 1e-6)      # refined below, from the fit
-    n_k = 2 if refine_distortion else 0
+    prior_rows = np.flatnonzero(free)
+    n_par = len(p0)
+    prior_jac = sp.csr_matrix((1 / sigmas[prior_rows], (np.arange(len(prior_rows)), prior_rows)),
+                              shape=(len(prior_rows), n_par))
+
+    def held(p):
+        q = p.copy()
+        q[:NI] = np.where(free, p[:NI], fixed_values)
+        return q
 
     def residuals(p):
-        q = p.copy()
-        if not refine_distortion:
-            q[1:3] = 0.0
+        q = held(p)
         r = ((prob.project(q) - obs) / sigma).ravel()
-        prior = [(q[0] - np.log(f_centre)) / f_sigma] + [q[1] / k_sigma, q[2] / k_sigma][:n_k]
-        return np.concatenate([r, prior])
-
-    n_par = len(p0)
-    prior_jac = sp.csr_matrix((np.r_[1 / f_sigma, np.full(n_k, 1 / k_sigma)], (np.arange(1 + n_k),
-                               np.arange(1 + n_k))), shape=(1 + n_k, n_par))
+        return np.concatenate([r, (q[prior_rows] - centre[prior_rows]) / sigmas[prior_rows]])
 
     def jacobian(p):
-        return sp.vstack([prob.jacobian(p, refine_distortion) / sigma, prior_jac]).tocsr()
-    p = p0
+        return sp.vstack([prob.jacobian(held(p), free) / sigma, prior_jac]).tocsr()
+
+    p, settled = p0, False
     for _ in range(4):         # σ from the residuals at the current optimum, until it settles (within 2 %)
         res = least_squares(residuals, p, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_nfev,
                             ftol=1e-10, xtol=1e-10, tr_solver="lsmr")
-        p = res.x
-        q = p.copy()
-        if not refine_distortion:
-            q[1:3] = 0.0
-        new = max(float(np.median(np.linalg.norm(prob.project(q) - obs, axis=1))) / RAYLEIGH_MEDIAN, 1e-6)
+        p = held(res.x)
+        new = max(float(np.median(np.linalg.norm(prob.project(p) - obs, axis=1))) / RAYLEIGH_MEDIAN, 1e-6)
         settled, sigma = abs(new / sigma - 1) < 0.02, new
         if settled:
             break
-    res = least_squares(residuals, p, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_nfev,
-                        ftol=1e-10, xtol=1e-10, tr_solver="lsmr") if not settled else res
-    f, k1, k2, Rv, tv, Xv = prob.unpack(res.x)
-    if not refine_distortion:
-        k1 = k2 = 0.0
-    r_end = np.linalg.norm(prob.project(np.concatenate([res.x[:1], [k1, k2], res.x[3:]])) - obs, axis=1)
-    cov = _intrinsics_covariance(res.jac, 3, 6 * len(views), len(pts))
+    if not settled:
+        res = least_squares(residuals, p, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_nfev,
+                            ftol=1e-10, xtol=1e-10, tr_solver="lsmr")
+        p = held(res.x)
+    f, k1, k2, c, Rv, tv, Xv = prob.unpack(p)
+    r_end = np.linalg.norm(prob.project(p) - obs, axis=1)
+    cov = _intrinsics_covariance(res.jac, NI, 6 * len(views), len(pts))
     R_out, t_out, X_out = np.full_like(R, np.nan), np.full_like(t, np.nan), np.full_like(X, np.nan)
     R_out[views], t_out[views], X_out[pts] = Rv, tv, Xv
     K = K0.copy()
     K[0, 0] = K[1, 1] = f
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    return SharedIntrinsics(K, np.array([k1, k2]), R_out, t_out, X_out, float(f * sd[0]),
-                            sd[1:3] if refine_distortion else np.zeros(2), sigma,
+    K[:2, 2] = c
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None)) * free
+    return SharedIntrinsics(K, np.array([k1, k2]), R_out, t_out, X_out, float(f * sd[0]), sd[1:3], sd[3:5], sigma,
                             (float(np.sqrt(np.mean(r_start ** 2))), float(np.sqrt(np.mean(r_end ** 2)))),
                             int(len(ci)), bool(res.success))
 

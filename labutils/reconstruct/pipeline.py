@@ -58,6 +58,8 @@ class PhotoReconstruction:
     focal : dict
         ``value``, ``sd`` (pixels; 0 when given), ``source`` and ``start`` (the first guess).
     capture : CaptureReport
+    self_calibration : (n, 2) ndarray or None
+        The self-calibration's curve ``(f in original pixels, median asymmetry of E)``, when it ran.
     log : list of str
     """
 
@@ -72,6 +74,7 @@ class PhotoReconstruction:
     normals: np.ndarray
     focal: dict
     capture: CaptureReport
+    self_calibration: np.ndarray = None
     log: list = field(default_factory=list, repr=False)
 
     def cameras(self):
@@ -168,6 +171,7 @@ def reconstruct_photos(paths, *, rng, K=None, dist=None, max_size=1200, min_inli
                                  report.problems else "") + ")")
 
     c_work = np.array([(grays[0].shape[1] - 1) / 2, (grays[0].shape[0] - 1) / 2])
+    curve = None
     if K is not None:
         K = as_calibration(K, "K")
         Kw = scale_calibration(K, s)
@@ -177,7 +181,10 @@ def reconstruct_photos(paths, *, rng, K=None, dist=None, max_size=1200, min_inli
     else:
         guess = focal_from_exif(paths[0])
         Fs = [result.geometry[p].F for p in result.matches]
-        f_self, _, sharp = focal_from_fundamentals(Fs, c_work, max(grays[0].shape)) if Fs else (None, None, 1.0)
+        f_self, curve, sharp = (focal_from_fundamentals(Fs, c_work, max(grays[0].shape)) if Fs
+                                else (None, None, 1.0))
+        if curve is not None:
+            curve = np.column_stack([curve[:, 0] / s, curve[:, 1]])
         if guess.source != "guess":
             f_start, sigma = guess.f_px * s, focal_prior_sigma or 0.1
             log(f"camera: {guess.text}; self-calibration from {len(Fs)} pairs says {f_self / s:.0f} px")
@@ -225,7 +232,7 @@ def reconstruct_photos(paths, *, rng, K=None, dist=None, max_size=1200, min_inli
         log(f"view {v} ({names[v]}) did not register" + (" (outside the connected group)"
                                                          if report.component[v] else ""))
     return PhotoReconstruction(names, K_out, np.asarray(d, float), R, t, registered, X[ok], colors, normals, focal,
-                               report, list(rec.log))
+                               report, curve, list(rec.log))
 
 
 def _colours(paths, x, vis, max_size):
