@@ -18,9 +18,9 @@ from labutils.reconstruct import (
     focal_from_exif,
     focal_from_fundamentals,
     refine_shared_intrinsics,
+    render_photo_folder,
     sharpness,
 )
-from labutils.reconstruct.synthetic import render_photo_folder
 from labutils.twoview import fundamental_from_pose
 
 ROOT = Path(__file__).resolve().parents[1]

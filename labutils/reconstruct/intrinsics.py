@@ -192,7 +192,8 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
                              K0: ArrayLike, *, dist0: ArrayLike = (0.0, 0.0), f_prior: tuple = None,
                              k_sigma: float = 0.5, c_sigma: float | None = None, max_nfev: int = 200,
                              max_points: int | None = 400, refine_distortion: bool = True) -> SharedIntrinsics:
-    """Bundle adjustment with one focal length, radial distortion ``(k1, k2)`` (and principal point) shared by all views.
+    """Bundle adjustment with one focal length, radial distortion ``(k1, k2)`` and optionally the principal point,
+    shared by all views.
 
     Parameters
     ----------
