@@ -195,6 +195,8 @@ def test_an_output_that_is_an_input_is_refused_before_any_work(tmp_path):
         cv2.imwrite(str(photos / f"{k}.png"), np.zeros((32, 32), np.uint8))
     before = (photos / "0.png").read_bytes()
     p = _run(photos, "--out", photos / "0.png")
-    assert p.returncode == 2 and "is one of the inputs" in p.stderr and (photos / "0.png").read_bytes() == before
+    assert p.returncode == 2 and "--out is a photo" in p.stderr and (photos / "0.png").read_bytes() == before
     p = _run(photos, "--out", tmp_path / "a.json", "--report", tmp_path / "a.json")
-    assert p.returncode == 2 and "two outputs name the same file" in p.stderr
+    assert p.returncode == 2 and "--report and --out name the same file" in p.stderr
+    p = _run(photos, "--out", tmp_path / "a.json", "--seed", "-1")
+    assert p.returncode == 2 and "--seed: must be a non-negative integer" in p.stderr

@@ -16,7 +16,6 @@ every failure one line (``error: ...``), exit status 2, nothing written. An outp
 the calibration or another output is refused before any work.
 """
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -29,24 +28,13 @@ from ..data.ply.write import write_points
 from .pipeline import NotReconstructable, image_files, reconstruct_photos
 
 
-def _same(a, b):
-    a, b = Path(a), Path(b)
-    try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
 def _check_outputs(args, photos):
-    outs = [(args.out, "--out")] + [(p, f) for p, f in ((args.ply, "--ply"), (args.report, "--report")) if p]
+    outs = [(args.out, "--out"), (args.ply, "--ply"), (args.report, "--report")]
     for path, flag in outs:
-        _cli.check_output_path(path, flag)
-        for src in photos + [p for p in (args.K, args.calibration) if p]:
-            if Path(path).resolve() == Path(src).resolve() or _same(path, src):
-                raise _cli.CommandError(f"{path}: {flag} is one of the inputs; give another file name")
-    resolved = [Path(p).resolve() for p, _ in outs]
-    if len(set(resolved)) < len(resolved):
-        raise _cli.CommandError(f"{outs[0][0]}: two outputs name the same file")
+        if path:
+            _cli.check_output_path(path, flag)
+    _cli.check_distinct(outs, [(p, "a photo") for p in photos]
+                        + [(args.K, "the --K file"), (args.calibration, "the --calibration file")])
 
 
 def _camera(args, n):
@@ -96,11 +84,9 @@ def main(argv=None):
     parser.add_argument("--report", help="also write a Markdown report: capture check, camera, result")
     parser.add_argument("--max-size", type=int, default=1200, help="working size: longer side in pixels "
                                                                    "(default 1200)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
+    parser.add_argument("--seed", type=_cli.seed_arg, default=0, help="seed of the random generator (default 0)")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = parser.parse_args(argv)
-    if args.seed < 0:
-        raise _cli.CommandError(f"--seed must be a non-negative integer; got {args.seed}")
     if args.max_size < 64:
         raise _cli.CommandError(f"--max-size must be at least 64 pixels; got {args.max_size}")
     folder = Path(args.photos_dir)
