@@ -24,7 +24,17 @@ Pixels: ``(x, y)`` with x right, y down; pixel ``mask[r, c]`` is centred on ``(c
 ``(x, y)`` falls in ``mask[floor(y + 0.5), floor(x + 0.5)]``. Cameras: ``P = K [R | t]`` (any scale or sign of P
 is accepted: depth is taken as in H&Z Sec. 6.2.3).
 """
+from .consensus import (
+    MIN_AGREEMENT,
+    Silhouettes,
+    choose_threshold,
+    segment_views,
+    threshold_ladder,
+    unsure_views,
+    unsure_warning,
+)
 from .silhouettes import (
+    QUANTISATION,
     BackgroundModel,
     background_model,
     clean_mask,
@@ -33,17 +43,11 @@ from .silhouettes import (
     signed_distance_map,
     silhouette,
 )
-from .surface import (
-    THRESHOLD_CANDIDATES,
-    choose_threshold,
-    mesh_volume,
-    render_silhouette,
-    silhouette_ious,
-    surface_mesh,
-)
+from .surface import mesh_volume, render_silhouette, silhouette_ious, surface_mesh
 from .voxels import Carving, VoxelGrid, bounding_box_from_silhouettes, carve, inside_silhouette, project_with_depth
 
 __all__ = ["BackgroundModel", "background_model", "colour_distance", "silhouette", "clean_mask", "signed_distance_map",
            "mask_iou", "VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve",
            "bounding_box_from_silhouettes", "surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious",
-           "THRESHOLD_CANDIDATES", "choose_threshold"]
+           "QUANTISATION", "threshold_ladder", "choose_threshold", "Silhouettes", "segment_views", "MIN_AGREEMENT",
+           "unsure_views", "unsure_warning"]
