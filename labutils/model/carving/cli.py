@@ -129,7 +129,7 @@ def _compute(args, views, images, par):
     t0 = time.perf_counter()
     threshold = args.threshold
     if threshold is None:
-        seg = segment_views(images, P, every=3)
+        seg = segment_views(images, P, every=3, check=False)     # the finer model below is checked
         table = ", ".join(f"{c:.3g}: {sc:.3f}" for c, sc in zip(seg.candidates, seg.scores[:, 0]) if np.isfinite(sc))
         threshold, masks = seg.threshold, seg.masks
         _log(args.quiet, f"carve: background of {seg.model.n_clusters} colour clusters from the image borders; "

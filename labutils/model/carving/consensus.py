@@ -115,11 +115,11 @@ class Silhouettes:
     scores : (C, 2) ndarray
         Per candidate: median and minimum agreement IoU (see :func:`choose_threshold`) on the subsampled images;
         NaN for the candidates not tried.
-    agreement : (V,) ndarray
+    agreement : (V,) ndarray or None
         Per view, at the chosen threshold: the IoU of the carved model's silhouette (a grid of ``n_check`` voxels
-        along the box's longest side) with the mask.
-    unsure : (U,) int ndarray
-        The views whose agreement is below :data:`MIN_AGREEMENT` (:func:`unsure_views`).
+        along the box's longest side) with the mask; None when not checked.
+    unsure : (U,) int ndarray or None
+        The views whose agreement is below :data:`MIN_AGREEMENT` (:func:`unsure_views`); None when not checked.
     model : BackgroundModel
     """
 
@@ -132,8 +132,8 @@ class Silhouettes:
     model: BackgroundModel = field(repr=False)
 
     def warning(self, names: Sequence[str] | None = None) -> str | None:
-        """One line naming the unsure views (see :func:`unsure_warning`), or None when none is."""
-        return unsure_warning(self.agreement, names)
+        """One line naming the unsure views (see :func:`unsure_warning`), or None when none is (or not checked)."""
+        return None if self.agreement is None else unsure_warning(self.agreement, names)
 
 
 def unsure_views(agreement: ArrayLike, min_agreement: float = MIN_AGREEMENT) -> np.ndarray:
@@ -170,8 +170,8 @@ def unsure_warning(agreement: ArrayLike, names: Sequence[str] | None = None,
 
 
 def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: BackgroundModel | None = None, n: int = 40,
-                  n_check: int = 80, every: int = 1, steps: int = 11, min_component: float = 0.02,
-                  max_hole: float = 0.002) -> Silhouettes:
+                  n_check: int = 80, check: bool = True, every: int = 1, steps: int = 11,
+                  min_component: float = 0.02, max_hole: float = 0.002) -> Silhouettes:
     """Silhouettes of calibrated views of one object, with a threshold from the data and a check of each view.
 
     1. The background's colours from the image borders (:func:`background_model`), unless ``model`` is given; each
@@ -180,7 +180,8 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
        whose silhouettes agree best after carving a coarse grid wins (:func:`choose_threshold`: every other
        candidate first, then the two beside the best; on images subsampled to about 8 pixels per voxel).
     3. The check: per view, the agreement (IoU) of its mask with the model carved from all masks on a finer grid
-       (``n_check``); a view below :data:`MIN_AGREEMENT` is unsure: its mask and the others contradict each other.
+       (``n_check``; masks subsampled like the images in 2); a view below :data:`MIN_AGREEMENT` is unsure: its mask
+       and the others contradict each other.
 
     Parameters
     ----------
@@ -191,6 +192,9 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
         Voxels along the longest side of the coarse grids that choose the threshold.
     n_check : int
         Voxels along the longest side of the grid that checks the chosen masks.
+    check : bool
+        False: skip the check (``agreement`` and ``unsure`` are None), e.g. when the caller carves a finer model and
+        checks its silhouettes itself (:func:`unsure_warning`).
     every : int
         Score every ``every``-th view while choosing the threshold (the check covers every view).
     steps : int
@@ -202,6 +206,7 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
 
     Examples
     --------
+    >>> from labutils.model.carving import mask_iou
     >>> from labutils.model.synthetic import make_snowman
     >>> s = make_snowman(8, rng=np.random.default_rng(0), image_size=(80, 60), f=105.0, colour=(200, 200, 200),
     ...                  background=(10, 10, 10))                 # a light-grey object on a black background
@@ -219,6 +224,8 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
         raise ValueError(f"model must be a BackgroundModel (from background_model); got {type(model).__name__}")
     n = _as_number(n, "n", lo=4, integer=True)
     n_check = _as_number(n_check, "n_check", lo=4, integer=True)
+    if not isinstance(check, bool | np.bool_):
+        raise ValueError(f"check must be True or False; got {check!r}")
     distances = [colour_distance(im, model) for im in images]
     candidates = threshold_ladder(model.threshold, steps)
     # the choice works on images subsampled to about 8 pixels per coarse voxel across: finer pixels change nothing
@@ -236,6 +243,9 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
     best = float(candidates[int(np.nanargmax(scores[:, 0]))])
 
     masks = [clean_mask(d > best, min_component=min_component, max_hole=max_hole) for d in distances]
-    grid = VoxelGrid.from_box(bounding_box_from_silhouettes(masks, P), n_check)
-    agreement = _agreement(masks, P, grid, 1)
+    if not check:
+        return Silhouettes(masks, best, candidates, scores, None, None, model)
+    small = [m[::stride, ::stride] for m in masks]
+    grid = VoxelGrid.from_box(bounding_box_from_silhouettes(small, P_small), n_check)
+    agreement = _agreement(small, P_small, grid, 1)
     return Silhouettes(masks, best, candidates, scores, agreement, unsure_views(agreement), model)
