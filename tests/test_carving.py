@@ -299,6 +299,7 @@ SCENES = {   # object's paint, background (one colour, or a wall above a table)
     "black on grey": ((25, 25, 25), (150, 150, 150)),
     "red on green": ((200, 40, 40), (40, 150, 60)),
     "blue on a black wall and a white table": ((50, 80, 200), [(15, 15, 15), (200, 200, 200)]),
+    "light grey on a black wall and a dark grey table": ((200, 200, 200), [(10, 10, 10), (45, 45, 45)]),
     "yellow on a blue wall and a white table": ((230, 200, 60), [(60, 75, 170), (210, 210, 210)]),
 }
 
