@@ -415,6 +415,57 @@ def test_temple_box_from_silhouettes():
     assert np.all(box[1] - box[0] < 1.4 * (TEMPLE_BOX[1] - TEMPLE_BOX[0])), box
 
 
+@pytest.fixture(scope="module")
+def temple_views():
+    from labutils.data.loaders import DataNotFoundError, load_temple
+
+    try:
+        temple = load_temple()
+    except DataNotFoundError as exc:
+        pytest.skip(f"real data missing: {str(exc).splitlines()[0]}")
+    idx = list(range(0, temple.n_views, 4))                  # 12 views at half size: seconds, not minutes
+    return [temple.image(i)[::2, ::2] for i in idx], np.diag([0.5, 0.5, 1.0]) @ temple.P[idx]
+
+
+TEMPLE_VARIANTS = {
+    "colour": lambda a: a,
+    "darkened": lambda a: np.round(a * 0.5).astype(np.uint8),
+    "brightened": lambda a: np.clip(np.round(a * 1.6), 0, 255).astype(np.uint8),
+    "inverted (dark on light)": lambda a: 255 - a,
+}
+
+
+@pytest.mark.parametrize("variant", list(TEMPLE_VARIANTS))
+def test_temple_silhouettes_agree_in_every_view(temple_views, variant):
+    images, P = temple_views
+    r = segment_views([TEMPLE_VARIANTS[variant](im) for im in images], P, n=32, n_check=64)
+    assert r.unsure.size == 0 and r.agreement.min() >= 0.9, (variant, r.agreement)
+
+
+def test_grey_temple_is_reported_unsure(temple_views):
+    """In grey, the temple's shaded faces and the glow of the black cloth around it have the same lightness: no
+    colour threshold separates them (the agreement stays near 0.8), and the check says so."""
+    images, P = temple_views
+    grey = [np.repeat(cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)[..., None], 3, axis=-1) for im in images]
+    r = segment_views(grey, P, n=32, n_check=64)
+    assert r.unsure.size >= 3 and r.warning() is not None
+
+
+def test_dino_silhouettes_agree_in_every_view():
+    from labutils.data.loaders import DataNotFoundError, load_dino
+
+    try:
+        dino = load_dino()
+        if dino.image_paths is None:
+            raise DataNotFoundError("the dinosaur's images are missing")
+    except DataNotFoundError as exc:
+        pytest.skip(f"real data missing: {str(exc).splitlines()[0]}")
+    idx = list(range(0, dino.n_views, 3))
+    r = segment_views([dino.image(i)[::2, ::2] for i in idx], np.diag([0.5, 0.5, 1.0]) @ dino.P[idx], n=32,
+                      n_check=64)
+    assert r.unsure.size == 0 and r.agreement.min() >= 0.9, r.agreement
+
+
 # --- the camera file and the command line --------------------------------------------------------------------------
 
 

@@ -130,10 +130,11 @@ def _compute(args, views, images, par):
     threshold = args.threshold
     if threshold is None:
         seg = segment_views(images, P, every=3, check=False)     # the finer model below is checked
-        table = ", ".join(f"{c:.3g}: {sc:.3f}" for c, sc in zip(seg.candidates, seg.scores[:, 0]) if np.isfinite(sc))
+        table = ", ".join(f"{c:.3g}: {med:.3f}/{lo:.3f}"
+                          for c, (med, lo) in zip(seg.candidates, seg.scores) if med >= 0)
         threshold, masks = seg.threshold, seg.masks
         _log(args.quiet, f"carve: background of {seg.model.n_clusters} colour clusters from the image borders; "
-                         f"colour threshold {threshold:.3g} (silhouette agreement, median IoU on a coarse grid: "
+                         f"colour threshold {threshold:.3g} (silhouette agreement on a coarse grid, median/min IoU: "
                          f"{table}) [{time.perf_counter() - t0:.1f} s]")
     else:
         model = background_model(images)

@@ -48,9 +48,11 @@ def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, candidates: S
     With exact cameras, the visual hull of perfect silhouettes reprojects exactly onto each of them; a mask that
     misses part of the object carves it away in every other view, and one with extra background is carved away
     by the others. So for each candidate threshold we carve a coarse grid (``n`` voxels along the box's longest
-    side), take its surface and score the silhouettes' agreement: the median over views of the IoU between the
-    surface's silhouette and the mask. The best-scoring threshold wins (the lowest among equals: a piece missing
-    from a mask costs the model more than a piece of background added).
+    side), take its surface and score the silhouettes' agreement: the IoU between the surface's silhouette and the
+    mask, in every view scored. The threshold with the highest median plus minimum wins (every view should agree,
+    not only most; the lowest among equals: a piece missing from a mask costs the model more than a piece of
+    background added). Candidates are tried in increasing order; once one leaves nothing after carving, the higher
+    ones (smaller masks) are not tried.
 
     Parameters
     ----------
@@ -68,7 +70,7 @@ def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, candidates: S
     best : float
     scores : (len(candidates), 2) ndarray
         Per candidate (in increasing order): the median and the minimum IoU over the views scored; -1 when
-        nothing is left after carving.
+        nothing is left after carving (or a lower candidate left nothing: not tried).
 
     Raises
     ------
@@ -84,20 +86,21 @@ def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, candidates: S
         raise ValueError("candidates is empty: give at least one threshold")
     n = _as_number(n, "n", lo=4, integer=True)
     every = _as_number(every, "every", lo=1, integer=True)
-    masks_of = [[clean_mask(d > c, min_component=min_component, max_hole=max_hole) for d in distances]
-                for c in candidates]
     scores = np.full((len(candidates), 2), -1.0)
     grid = None
-    for k, masks in enumerate(masks_of):
+    for k, c in enumerate(candidates):
+        masks = [clean_mask(d > c, min_component=min_component, max_hole=max_hole) for d in distances]
         if not all(m.any() for m in masks):
-            continue
+            break
         if grid is None:                   # the most inclusive non-empty masks give the largest box
             grid = VoxelGrid.from_box(bounding_box_from_silhouettes(masks, P), n)
         ious = _agreement(masks, P, grid, every)
         scores[k] = np.median(ious), ious.min()
+        if scores[k, 0] < 0:
+            break
     if np.all(scores[:, 0] < 0):
         raise ValueError("every candidate threshold carves every voxel away: the masks and cameras disagree")
-    return candidates[int(np.argmax(scores[:, 0]))], scores
+    return candidates[int(np.argmax(scores.sum(axis=1)))], scores
 
 
 @dataclass
@@ -113,8 +116,7 @@ class Silhouettes:
     candidates : (C,) ndarray
         The thresholds tried (:func:`threshold_ladder`).
     scores : (C, 2) ndarray
-        Per candidate: median and minimum agreement IoU (see :func:`choose_threshold`) on the subsampled images;
-        NaN for the candidates not tried.
+        Per candidate: median and minimum agreement IoU (see :func:`choose_threshold`) on the subsampled images.
     agreement : (V,) ndarray or None
         Per view, at the chosen threshold: the IoU of the carved model's silhouette (a grid of ``n_check`` voxels
         along the box's longest side) with the mask; None when not checked.
@@ -177,8 +179,8 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
     1. The background's colours from the image borders (:func:`background_model`), unless ``model`` is given; each
        pixel's distance to them (:func:`colour_distance`).
     2. Candidate thresholds from the border's own false-alarm threshold upwards (:func:`threshold_ladder`); the one
-       whose silhouettes agree best after carving a coarse grid wins (:func:`choose_threshold`: every other
-       candidate first, then the two beside the best; on images subsampled to about 8 pixels per voxel).
+       whose silhouettes agree best after carving a coarse grid wins (:func:`choose_threshold`, on images
+       subsampled to about 8 pixels per voxel).
     3. The check: per view, the agreement (IoU) of its mask with the model carved from all masks on a finer grid
        (``n_check``; masks subsampled like the images in 2); a view below :data:`MIN_AGREEMENT` is unsure: its mask
        and the others contradict each other.
@@ -232,15 +234,9 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
     stride = max(1, int(np.ceil(max(max(d.shape) for d in distances) / (8 * n))))
     small = [d[::stride, ::stride] for d in distances]
     P_small = np.diag([1.0 / stride, 1.0 / stride, 1.0]) @ P          # pixel (r, c) of the subsampled image
-    kw = dict(n=n, every=every, min_component=min_component, max_hole=max_hole)
-    scores = np.full((len(candidates), 2), np.nan)
-    coarse = np.arange(0, len(candidates), 2)                           # every other step first, then the
-    scores[coarse] = choose_threshold(small, P_small, candidates[coarse], **kw)[1]   # neighbours of the best
-    k = int(coarse[np.argmax(scores[coarse, 0])])
-    fine = np.array([j for j in (k - 1, k + 1) if 0 <= j < len(candidates)], int)
-    if fine.size:
-        scores[fine] = choose_threshold(small, P_small, candidates[fine], **kw)[1]
-    best = float(candidates[int(np.nanargmax(scores[:, 0]))])
+    best, scores = choose_threshold(small, P_small, candidates, n=n, every=every, min_component=min_component,
+                                    max_hole=max_hole)
+    best = float(best)
 
     masks = [clean_mask(d > best, min_component=min_component, max_hole=max_hole) for d in distances]
     if not check:
