@@ -32,6 +32,7 @@ from .consensus import (
     MIN_AGREEMENT,
     Silhouettes,
     choose_threshold,
+    refine_mask,
     segment_views,
     threshold_ladder,
     unsure_views,
@@ -54,4 +55,5 @@ __all__ = ["BackgroundModel", "background_model", "colour_distance", "silhouette
            "mask_iou", "VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve",
            "bounding_box_from_silhouettes", "surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious",
            "QUANTISATION", "threshold_ladder", "choose_threshold", "Silhouettes", "segment_views", "MIN_AGREEMENT",
+           "refine_mask",
            "unsure_views", "unsure_warning"]

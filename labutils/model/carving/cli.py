@@ -31,9 +31,11 @@ from . import (
     carve,
     clean_mask,
     colour_distance,
+    refine_mask,
     segment_views,
     silhouette_ious,
     surface_mesh,
+    unsure_views,
     unsure_warning,
 )
 
@@ -135,14 +137,16 @@ def _compute(args, views, images, par):
     t0 = time.perf_counter()
     threshold = args.threshold
     if threshold is None:
-        seg = segment_views(images, P, every=3, check=False)     # the finer model below is checked
+        seg = segment_views(images, P, every=3)          # checked (and refined where unsure); the finer model too
         table = ", ".join(f"{c:.3g}: {med:.3f}/{lo:.3f}"
                           for c, (med, lo) in zip(seg.candidates, seg.scores) if med >= 0)
         threshold, masks = seg.threshold, seg.masks
         _log(args.quiet, f"carve: background of {seg.model.n_clusters} colour clusters from the image borders; "
                          f"colour threshold {threshold:.3g} (silhouette agreement on a coarse grid, median/min IoU: "
-                         f"{table}) [{time.perf_counter() - t0:.1f} s]")
+                         f"{table})" + ("; unsure views: every mask refined by GrabCut" if seg.refined else "")
+                         + f" [{time.perf_counter() - t0:.1f} s]")
     else:
+        seg = None
         model = background_model(images)
         masks = [clean_mask(colour_distance(img, model) > threshold) for img in images]
     empty = [str(views.image_paths[i]) for i, m in enumerate(masks) if not m.any()]
@@ -166,6 +170,21 @@ def _compute(args, views, images, par):
                          "P = K [R | t] maps the object into each image, and look at the masks with --masks)")
     vertices, faces, normals = surface_mesh(carving)
     ious = silhouette_ious(vertices, faces, masks, P)
+    if seg is not None and unsure_views(ious).size and not seg.refined:
+        # the model and some masks disagree: decide the edges again with spatial coherence (GrabCut), carve again,
+        # and keep whichever set of masks the model explains better (median plus minimum IoU)
+        refined = [refine_mask(img, m) if m.any() else m for img, m in zip(images, masks)]
+        if all(m.any() for m in refined):
+            grid_r = VoxelGrid.from_box(bounding_box_from_silhouettes(refined, P), args.grid)
+            carving_r = carve(refined, P, grid_r)
+            if carving_r.n_occupied:
+                V_r, F_r, N_r = surface_mesh(carving_r)
+                ious_r = silhouette_ious(V_r, F_r, refined, P)
+                if np.median(ious_r) + ious_r.min() > np.median(ious) + ious.min():
+                    _log(args.quiet, f"carve: unsure views (min IoU {ious.min():.3f}): every mask refined by "
+                                     f"GrabCut, carved again: min IoU {ious_r.min():.3f}")
+                    masks, grid, carving, ious = refined, grid_r, carving_r, ious_r
+                    vertices, faces, normals = V_r, F_r, N_r
     _log(args.quiet, f"carve: {carving.n_occupied:,} voxels occupied, surface {len(vertices):,} vertices and "
                      f"{len(faces):,} triangles [{time.perf_counter() - t0:.1f} s]; IoU of its silhouettes with "
                      f"the masks: min {ious.min():.3f} (view {int(np.argmin(ious))}), median {np.median(ious):.3f}")
