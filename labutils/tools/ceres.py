@@ -1,0 +1,191 @@
+"""Ceres, the reference bundle adjuster, through pycolmap (an optional extra: ``pip install -e .[bench]``).
+
+Only the benchmarks use it (:mod:`labutils.tools.bench`): it runs COLMAP's Ceres bundle adjuster on the same
+problem our solver gets, with the same cost (plain least squares on the pixel residuals), the same frozen
+parameters, one thread, and the stopping rule of ours (relative cost decrease ``tol``, step ``1e-2 tol``), so that
+both times come from one run on one machine. Nothing of the workbook needs it; :func:`ceres_available` says
+whether it is installed.
+
+Models: the BAL camera (``p = -P[:2] / P[2]``, ``u = f (1 + k1‖p‖² + k2‖p‖⁴) p``, looking down -z) is COLMAP's
+``RADIAL`` camera with the principal point at 0 after turning the camera by π about its y axis (a proper
+rotation: ``P' = diag(-1, 1, -1) P``) and mirroring the observed x coordinate; the pinhole camera (no skew) is
+COLMAP's ``PINHOLE`` with the intrinsics held.
+"""
+import importlib.util
+import time
+
+import numpy as np
+
+from ..core.geometry import angle_axis_from_rotation, rotation_from_angle_axis
+
+_FLIP = np.diag([-1.0, 1.0, -1.0])      # BAL camera frame -> COLMAP's (z forward)
+
+
+def ceres_available() -> bool:
+    """True when pycolmap (with its Ceres bundle adjuster) is importable.
+
+    >>> isinstance(ceres_available(), bool)
+    True
+    """
+    return importlib.util.find_spec("pycolmap") is not None
+
+
+def ceres_bundle_adjust(camera_params, points_3d, camera_indices, point_indices, points_2d, K=None, *,
+                        fix_intrinsics=False, max_iter=500, tol=1e-6, threads=1) -> dict:
+    """Solve a bundle-adjustment problem with COLMAP's Ceres bundle adjuster (needs pycolmap).
+
+    Parameters
+    ----------
+    camera_params : (V, 6) or (V, 9) ndarray
+        ``[ω, t]`` (pinhole, with ``K`` (3, 3) without skew; intrinsics held) or ``[ω, t, f, k1, k2]`` (BAL,
+        ``K=None``; ``f, k1, k2`` refined unless ``fix_intrinsics``).
+    points_3d : (M, 3) ndarray
+    camera_indices, point_indices : (n,) int ndarray
+    points_2d : (n, 2) ndarray
+    K : (3, 3) ndarray or None
+    fix_intrinsics : bool
+    max_iter : int
+    tol : float
+        Ceres' ``function_tolerance``; ``parameter_tolerance`` is ``1e-2 tol`` (as ours).
+    threads : int
+
+    Returns
+    -------
+    dict
+        ``camera_params`` and ``points_3d`` at the end (in the input's parametrisation), ``seconds`` and
+        ``cpu_seconds`` (wall and CPU time of the solve, building the problem excluded), ``iterations`` (Ceres'
+        successful plus unsuccessful steps),
+        ``jacobian_evaluations``, ``ceres_cost_initial``, ``ceres_cost_final`` (Ceres' ``0.5·Σr²``), ``linear_solver``
+        and ``termination``.
+    """
+    import pycolmap as pc
+
+    cp = np.asarray(camera_params, float)
+    X = np.asarray(points_3d, float)
+    ci, pi = np.asarray(camera_indices, np.int64), np.asarray(point_indices, np.int64)
+    x = np.asarray(points_2d, float)
+    V, k = cp.shape
+    bal = k == 9
+    R = rotation_from_angle_axis(cp[:, :3])
+    t = cp[:, 3:6].copy()
+    if bal:
+        R, t, x = _FLIP @ R, t @ _FLIP, x * [-1.0, 1.0]
+    rec = pc.Reconstruction()
+    order = np.argsort(ci, kind="stable")
+    starts = np.searchsorted(ci[order], np.arange(V + 1))
+    slot = np.empty(ci.size, np.int64)                   # index of each observation among its image's keypoints
+    for c in range(V):
+        obs = order[starts[c]:starts[c + 1]]
+        slot[obs] = np.arange(obs.size)
+        if bal:
+            cam = pc.Camera(camera_id=c + 1, model="RADIAL", width=1, height=1,
+                            params=[cp[c, 6], 0.0, 0.0, cp[c, 7], cp[c, 8]])
+        else:
+            cam = pc.Camera(camera_id=c + 1, model="PINHOLE", width=1, height=1,
+                            params=[K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+        rec.add_camera_with_trivial_rig(cam)
+        im = pc.Image(name=str(c), keypoints=x[obs], camera_id=c + 1, image_id=c + 1)
+        rec.add_image_with_trivial_frame(im, pc.Rigid3d(np.hstack([R[c], t[c][:, None]])))
+    by_pt = np.argsort(pi, kind="stable")
+    pstarts = np.searchsorted(pi[by_pt], np.arange(X.shape[0] + 1))
+    ids = []
+    for j in range(X.shape[0]):
+        track = pc.Track()
+        for o in by_pt[pstarts[j]:pstarts[j + 1]]:
+            track.add_element(int(ci[o]) + 1, int(slot[o]))
+        ids.append(rec.add_point3D(X[j], track))
+    opts = pc.BundleAdjustmentOptions()
+    opts.print_summary = False
+    opts.refine_focal_length = opts.refine_extra_params = bal and not fix_intrinsics
+    opts.refine_principal_point = False
+    so = opts.ceres.solver_options
+    so.num_threads = threads
+    so.max_num_iterations = int(max_iter)
+    so.function_tolerance, so.parameter_tolerance, so.gradient_tolerance = tol, 1e-2 * tol, 1e-12
+    cfg = pc.BundleAdjustmentConfig()
+    for c in range(V):
+        cfg.add_image(c + 1)
+    cfg.fix_gauge(pc.BundleAdjustmentGauge.TWO_CAMS_FROM_WORLD)
+    adjuster = pc.create_default_bundle_adjuster(opts, cfg, rec)
+    wall, cpu = time.perf_counter(), time.process_time()
+    summary = adjuster.solve().ceres_summary
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    cp_out = cp.copy()
+    for c in range(V):
+        pose = rec.images[c + 1].cam_from_world().matrix()
+        Rc, tc = pose[:, :3], pose[:, 3]
+        if bal:
+            Rc, tc = _FLIP @ Rc, _FLIP @ tc
+            cp_out[c, 6], _, _, cp_out[c, 7], cp_out[c, 8] = rec.cameras[c + 1].params
+        cp_out[c, :3], cp_out[c, 3:6] = angle_axis_from_rotation(Rc[None])[0], tc
+    X_out = np.stack([rec.points3D[i].xyz for i in ids])
+    return dict(camera_params=cp_out, points_3d=X_out, seconds=wall, cpu_seconds=cpu,
+                iterations=int(summary.num_successful_steps + summary.num_unsuccessful_steps),
+                jacobian_evaluations=int(summary.num_jacobian_evaluations),
+                ceres_cost_initial=float(summary.initial_cost), ceres_cost_final=float(summary.final_cost),
+                linear_solver=str(summary.linear_solver_type_used).split(".")[-1],
+                termination=str(summary.termination_type).split(".")[-1])
+
+
+def synthetic_ba_problem(n_cameras: int, points_per_camera: int = 100, *, rng, noise_px: float = 0.5) -> tuple:
+    """A synthetic bundle-adjustment problem with the visibility of a video sequence, for the scaling run.
+
+    The cameras move along a circle of radius 20 looking outwards-forwards along the path (a walk around a
+    building); each camera creates ``points_per_camera`` new points 5 to 15 units ahead of it, and each point is seen
+    by the camera that created it and the next ``L - 1`` cameras (``L`` from 2 to 8, geometric with mean about 4, as
+    tracks are in real sequences), with ``noise_px`` pixels of noise. The cameras start perturbed (about 0.5° and
+    1 % of the step between cameras) and the points with 1 % of their depth.
+
+    Returns
+    -------
+    tuple
+        ``(camera_params (V, 6), points_3d (M, 3), camera_indices, point_indices, points_2d, K)``: the start,
+        the observations and the shared calibration (focal length 500 px, principal point (320, 240)).
+
+    >>> pb = synthetic_ba_problem(10, 20, rng=np.random.default_rng(0))
+    >>> pb[0].shape, pb[1].shape, bool(len(pb[2]) >= 2 * len(pb[1]))
+    ((10, 6), (200, 3), True)
+    """
+    V, n = int(n_cameras), int(points_per_camera)
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    ang = np.linspace(0, 2 * np.pi, V, endpoint=False) * min(1.0, V / 60)     # short sequences: an arc
+    C = 20 * np.stack([np.cos(ang), np.zeros(V), np.sin(ang)], 1)
+    fwd = np.stack([-np.sin(ang), np.zeros(V), np.cos(ang)], 1)               # along the path ...
+    out = C / 20
+    look = fwd + 0.5 * out                                                      # ... and a bit outwards
+    look /= np.linalg.norm(look, axis=1, keepdims=True)
+    down = np.array([0.0, 1.0, 0.0])
+    right = np.cross(down, look)
+    right /= np.linalg.norm(right, axis=1, keepdims=True)
+    R = np.stack([right, np.cross(look, right), look], 1)                       # rows: camera axes in the world
+    t = -np.einsum("vij,vj->vi", R, C)
+    # points: ahead of their camera, within its field of view
+    ci0 = np.repeat(np.arange(V), n)
+    depth = rng.uniform(5, 15, ci0.size)
+    xy = rng.uniform([-0.5, -0.4], [0.5, 0.4], (ci0.size, 2)) * depth[:, None]
+    Xc = np.column_stack([xy, depth])
+    X = np.einsum("nji,nj->ni", R[ci0], Xc - t[ci0])                            # R^T (x_cam - t)
+    L = np.minimum(2 + rng.geometric(0.4, ci0.size) - 1, 8)
+    ci = np.concatenate([ci0 + s for s in range(8)])
+    pi = np.tile(np.arange(ci0.size), 8)
+    keep = (np.repeat(np.arange(8), ci0.size) < np.tile(L, 8)) & (ci < V)
+    ci, pi = ci[keep], pi[keep]
+    P = np.einsum("nij,nj->ni", R[ci], X[pi]) + t[ci]
+    ok = P[:, 2] > 0.5
+    ci, pi, P = ci[ok], pi[ok], P[ok]
+    u = P[:, :2] / P[:, 2:] @ K[:2, :2].T + K[:2, 2] + noise_px * rng.normal(size=(ci.size, 2))
+    seen = np.bincount(pi, minlength=X.shape[0]) >= 2                          # keep points seen twice
+    new = np.cumsum(seen) - 1
+    o = seen[pi]
+    ci, pi, u = ci[o], new[pi[o]], u[o]
+    X = X[seen]
+    order = np.lexsort((ci, pi))
+    ci, pi, u = ci[order], pi[order], u[order]
+    step = 20 * (ang[1] - ang[0]) if V > 1 else 1.0
+    w = angle_axis_from_rotation(R) + np.deg2rad(0.5) * rng.normal(size=(V, 3)) / np.sqrt(3)
+    Rp = rotation_from_angle_axis(w)
+    Cp = C + 0.01 * step * rng.normal(size=(V, 3))
+    cp0 = np.hstack([w, -np.einsum("vij,vj->vi", Rp, Cp)])
+    depth_pt = np.linalg.norm(X - C[ci0[seen]], axis=1)
+    X0 = X + 0.01 * depth_pt[:, None] * rng.normal(size=X.shape) / np.sqrt(3)
+    return cp0, X0, ci, pi, u, K
