@@ -17,13 +17,17 @@ times are what it prints.
 For each it prints JSON with the seconds (wall and CPU), iterations, and initial and final cost
 ``0.5·Σr²`` (and the robust objective) of LM-Schur and of scipy's ``least_squares`` with the sparsity
 mask (finite differences), with our analytic sparse Jacobian, and with tighter LSMR tolerances
-(``x_scale='jac'`` throughout). pyceres / pycolmap are not project dependencies; the bench only reports
-whether ``pyceres`` is importable.
+(``x_scale='jac'`` throughout).
+
+Ceres, the reference, runs beside ours when pycolmap is installed (an optional extra, ``pip install -e .[bench]``;
+not a workbook requirement): :func:`bench_ceres` times both on one thread, in turn, on ladybug, the dinosaur
+(plain least squares, intrinsics held) and synthetic sequences of 10 to 300 cameras (time per step against
+observations and the fitted slope), and prints both times, both costs and the ratios
+(:mod:`labutils.tools.ceres`). Without pycolmap the section says ``"ceres": "not installed"``.
 
 The README's results table quotes what this prints on the 2-core workbook machine. Progress goes to stderr, one
 JSON document to stdout (``python -m labutils.bench ba | python -m json.tool`` works).
 """
-import importlib.util
 import json
 import os
 import sys
@@ -34,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bundle.adjust import bundle_adjust, solve_bal
+from ..bundle.reprojection import camera_params_from_Rt
 from ..core import cli as _cli
 from ..core.geometry import P_from_KRt
 from ..core.metrics import pose_errors
@@ -44,6 +49,7 @@ from ..data.bal import read_bal
 from ..data.loaders import load_scene
 from ..data.paths import find_data
 from ..twoview.triangulation import triangulate_multiview
+from .ceres import ceres_available, compare_with_ceres, scaling_run
 
 
 def dino_problem(*, rng, scene=None):
@@ -269,10 +275,38 @@ def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
         rows.append(_row(r, w, c, variant=name, rel_to_lm=r.cost_final / res.cost_final - 1,
                          speedup_of_lm=round(w / rows[0]["seconds"], 1)))
         progress(f"ladybug: {name} {w:.2f} s")
-    rows.append(dict(reference="pyceres", available=importlib.util.find_spec("pyceres") is not None,
-                     note="not a project dependency; not run"))
     return dict(problem="BAL ladybug problem-49-7776-pre: 49 cameras, 7776 points, 31843 observations; "
                         "all parameters (pose, f, k1, k2, points)", runs=rows)
+
+
+def bench_ceres(quick=False, progress=_say):
+    """Ours against Ceres (through pycolmap, when installed) on ladybug, the dinosaur and the scaling problems.
+
+    Plain least squares on both (Ceres applies a loss to a whole 2-vector residual, ours to each coordinate: only
+    the plain cost is the same). The dinosaur's cameras are those of :func:`dino_problem` with the intrinsics held
+    and the skew of its K set to 0 for both solvers (COLMAP's pinhole camera has no skew).
+    """
+    out = dict(available=ceres_available(), threads=1)
+    if not ceres_available():
+        progress("ceres: not installed (pip install -e .[bench]); timing ours only")
+        out["ceres"] = "not installed"
+    repeats = 1 if quick else 3
+    try:
+        p = read_bal(find_data("bal/problem-49-7776-pre.txt"))
+        progress("ceres: ladybug ...")
+        out["ladybug"] = compare_with_ceres((p.camera_params, p.points_3d, p.camera_indices, p.point_indices,
+                                             p.points_2d, None), repeats=repeats)
+    except FileNotFoundError as exc:
+        out["ladybug"] = dict(skipped=str(exc).splitlines()[0])
+    pb = dino_problem(rng=np.random.default_rng(0))
+    K = pb["scene"].K.copy()
+    K[0, 1] = 0.0
+    progress("ceres: dino ...")
+    out["dino"] = compare_with_ceres((camera_params_from_Rt(pb["R0"], pb["t0"]), pb["X0"], pb["camera_indices"],
+                                      pb["point_indices"], pb["points_2d"], K), repeats=repeats)
+    out["dino"]["note"] = "intrinsics held, skew of K set to 0 for both, plain least squares"
+    out["scaling"] = scaling_run((10, 30, 100) if quick else (10, 30, 100, 300), progress=progress)
+    return out
 
 
 NOTEBOOK_BUDGET_S = 90.0          # each notebook under nbval, on the 2-core CI machine (the developers' guide)
@@ -377,7 +411,7 @@ def main(argv=None):
         return 0
     variants = {"scipy-analytic": SCIPY_VARIANTS["scipy-analytic"]} if args.quick else SCIPY_VARIANTS
     n = 200 if args.quick else 2000
-    out = dict(machine=machine, dino=bench_dino(n, variants))
+    out = dict(machine=machine, ceres=bench_ceres(args.quick), dino=bench_dino(n, variants))
     try:
         out["ladybug"] = bench_ladybug(n, variants if (args.quick or args.all) else None)
     except FileNotFoundError as exc:

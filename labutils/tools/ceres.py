@@ -16,6 +16,8 @@ import time
 
 import numpy as np
 
+from ..bundle.adjust import bundle_adjust_params
+from ..bundle.reprojection import reprojection_residuals
 from ..core.geometry import angle_axis_from_rotation, rotation_from_angle_axis
 
 _FLIP = np.diag([-1.0, 1.0, -1.0])      # BAL camera frame -> COLMAP's (z forward)
@@ -144,7 +146,7 @@ def synthetic_ba_problem(n_cameras: int, points_per_camera: int = 100, *, rng, n
 
     >>> pb = synthetic_ba_problem(10, 20, rng=np.random.default_rng(0))
     >>> pb[0].shape, pb[1].shape, bool(len(pb[2]) >= 2 * len(pb[1]))
-    ((10, 6), (200, 3), True)
+    ((10, 6), (180, 3), True)
     """
     V, n = int(n_cameras), int(points_per_camera)
     K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
@@ -189,3 +191,92 @@ def synthetic_ba_problem(n_cameras: int, points_per_camera: int = 100, *, rng, n
     depth_pt = np.linalg.norm(X - C[ci0[seen]], axis=1)
     X0 = X + 0.01 * depth_pt[:, None] * rng.normal(size=X.shape) / np.sqrt(3)
     return cp0, X0, ci, pi, u, K
+
+
+def _cost(cp, X, ci, pi, x, K):
+    r = reprojection_residuals(cp, X, ci, pi, x, K)
+    return 0.5 * float(r @ r)
+
+
+def compare_with_ceres(problem: tuple, *, fix_intrinsics: bool = False, repeats: int = 3, tol: float = 1e-6,
+                       max_iter: int = 500) -> dict:
+    """Our LM-Schur and Ceres on one problem, in turn, ``repeats`` times: times, costs and their ratios.
+
+    Both minimise ``0.5·Σr²`` (plain least squares) with the same frozen parameters, on one thread, stopping at a
+    relative cost decrease below ``tol``. The cost of each result is evaluated by our own
+    :func:`labutils.bundle.reprojection_residuals`. Without pycolmap, only ours runs and ``ceres`` says so.
+
+    Parameters
+    ----------
+    problem : tuple
+        ``(camera_params, points_3d, camera_indices, point_indices, points_2d, K)`` (``K=None``: BAL model).
+
+    Returns
+    -------
+    dict
+        ``ours`` and ``ceres`` (median ``seconds``, ``cpu_seconds``, ``steps`` tried, ``cost_final``), and
+        ``ratio_cpu``/``ratio_wall`` (ours over Ceres, the median of the per-repeat ratios; above 1: we are
+        slower) and ``cost_ratio`` (ours over Ceres; at most 1: we reach a cost no higher).
+    """
+    cp, X, ci, pi, x, K = problem
+    ours, ceres = [], []
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        res = bundle_adjust_params(cp, X, ci, pi, x, K, fix_intrinsics=fix_intrinsics, max_iter=max_iter, tol=tol)
+        ours.append(dict(seconds=time.perf_counter() - w, cpu_seconds=time.process_time() - c,
+                         steps=res.n_eval - 1, iterations=res.n_iter, cost_final=res.cost_final))
+        if ceres_available():
+            out = ceres_bundle_adjust(cp, X, ci, pi, x, K, fix_intrinsics=fix_intrinsics, max_iter=max_iter,
+                                      tol=tol)
+            ceres.append(dict(seconds=out["seconds"], cpu_seconds=out["cpu_seconds"], steps=out["iterations"],
+                              iterations=out["jacobian_evaluations"],
+                              cost_final=_cost(out["camera_params"], out["points_3d"], ci, pi, x, K),
+                              linear_solver=out["linear_solver"], termination=out["termination"]))
+
+    def median(rows):
+        return {key: (float(np.median([r[key] for r in rows])) if isinstance(rows[0][key], float | int)
+                      else rows[0][key]) for key in rows[0]}
+
+    row = dict(n_cameras=len(cp), n_points=len(X), n_observations=len(ci), ours=median(ours))
+    if not ceres:
+        row["ceres"] = "not installed (pip install -e .[bench])"
+        return row
+    row["ceres"] = median(ceres)
+    row["ratio_cpu"] = round(float(np.median([a["cpu_seconds"] / b["cpu_seconds"] for a, b in zip(ours, ceres)])), 3)
+    row["ratio_wall"] = round(float(np.median([a["seconds"] / b["seconds"] for a, b in zip(ours, ceres)])), 3)
+    row["cost_ratio"] = row["ours"]["cost_final"] / row["ceres"]["cost_final"]
+    return row
+
+
+def scaling_run(sizes=(10, 30, 100, 300), *, points_per_camera: int = 100, repeats: int = 1, progress=None) -> dict:
+    """CPU time per step against observations, ours and Ceres, on :func:`synthetic_ba_problem` of each size.
+
+    A step is a damped linear solve tried (accepted or not): ours ``n_eval - 1``, Ceres' successful plus
+    unsuccessful iterations. The slope is the least-squares fit of ``log(seconds per step)`` against
+    ``log(observations)`` (1: linear).
+
+    Returns
+    -------
+    dict
+        ``runs`` (one :func:`compare_with_ceres` row per size, with ``ms_per_step`` of each solver) and
+        ``slope`` (``ours``, ``ceres`` when installed).
+    """
+    runs = []
+    for V in sizes:
+        row = compare_with_ceres(synthetic_ba_problem(V, points_per_camera, rng=np.random.default_rng(V)),
+                                 repeats=repeats)
+        for who in ("ours", "ceres"):
+            if isinstance(row[who], dict):
+                row[who]["ms_per_step"] = round(1e3 * row[who]["cpu_seconds"] / max(row[who]["steps"], 1), 2)
+        runs.append(row)
+        if progress is not None:
+            progress(f"scaling: {V} cameras, {row['n_observations']} observations: ours "
+                     f"{row['ours']['ms_per_step']} ms/step" + (f", ceres {row['ceres']['ms_per_step']} ms/step"
+                                                                 if isinstance(row["ceres"], dict) else ""))
+    n = np.log([r["n_observations"] for r in runs])
+    slope = {}
+    for who in ("ours", "ceres"):
+        if len(runs) >= 2 and all(isinstance(r[who], dict) for r in runs):
+            slope[who] = round(float(np.polyfit(n, np.log([r[who]["ms_per_step"] for r in runs]), 1)[0]), 3)
+    return dict(problem=f"synthetic sequences, {points_per_camera} new points per camera, tracks of 2-8 views, "
+                        "plain least squares, 6 parameters per camera (K known)", runs=runs, slope=slope)
