@@ -5,6 +5,7 @@ References: Persson & Nordberg, "Lambda Twist: An Accurate Fast Robust Perspecti
 Solver", ECCV 2018 (cited as LT); Hartley & Zisserman Sec. 7.1-7.2 (pose from known points) and
 Sec. 4.7 (RANSAC).
 """
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,12 +75,17 @@ def reprojection_errors(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, 
     X = as_points(X, "X", dim=3)
     x = as_points(x, "x", like=(X, "X"))
     K, R, t = as_calibration(K), as_rotation(R), as_matrix(t, "t", (3,))
-    u = (X @ R.T + t) @ K.T
-    z = u[:, 2]
-    front = (X @ R[2] + t[2]) > 0
+    return _reprojection_errors(X, x, K, R, t)
+
+
+def _reprojection_errors(X, x, K, R, t):
+    """The kernel of :func:`reprojection_errors` (trusts its input: the RANSAC loop calls it per hypothesis)."""
+    P = X @ R.T + t
+    u = P @ K.T
     with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.linalg.norm(u[:, :2] / z[:, None] - x, axis=1)
-    e[~front | ~np.isfinite(e)] = np.inf
+        d = u[:, :2] / u[:, 2:] - x
+        e = np.sqrt(d[:, 0] ** 2 + d[:, 1] ** 2)
+    e[~(P[:, 2] > 0) | ~np.isfinite(e)] = np.inf
     return e
 
 
@@ -102,26 +108,63 @@ def _cofactor(A):
     return np.column_stack([_cross(A[:, 1], A[:, 2]), _cross(A[:, 2], A[:, 0]), _cross(A[:, 0], A[:, 1])])
 
 
+def _cofactor_list(m):
+    """Cofactors of a 3×3 matrix given as its 9 entries in row order (a list), in the same order."""
+    a, b, c, d, e, f, g, h, i = m
+    return [e * i - f * h, f * g - d * i, d * h - e * g,
+            c * h - b * i, a * i - c * g, b * g - a * h,
+            b * f - c * e, c * d - a * f, a * e - b * d]
+
+
+def _cubic_real_roots(a, b, c, d):
+    """Real roots of a x³ + b x² + c x + d (closed form: Cardano, or the trigonometric form for three real roots;
+    the caller polishes them by Newton's method)."""
+    scale = max(abs(b), abs(c), abs(d))
+    if abs(a) <= 1e-12 * scale:                  # degenerate: a quadratic
+        return _quadratic_roots(b, c, d)
+    b, c, d = b / a, c / a, d / a
+    p, q = c - b * b / 3, 2 * b ** 3 / 27 - b * c / 3 + d
+    shift = -b / 3
+    disc = (q / 2) ** 2 + (p / 3) ** 3
+    if disc > 0:                                 # one real root
+        sq = math.sqrt(disc)
+        return [math.copysign(abs(-q / 2 + sq) ** (1 / 3), -q / 2 + sq)
+                + math.copysign(abs(-q / 2 - sq) ** (1 / 3), -q / 2 - sq) + shift]
+    if p == 0:
+        return [shift]
+    r = math.sqrt(-p / 3)
+    phi = math.acos(max(-1.0, min(1.0, -q / (2 * r ** 3))))
+    return [2 * r * math.cos((phi - 2 * math.pi * k) / 3) + shift for k in range(3)]
+
+
 def _refine_lambdas(lam, a, b, iters=5):
-    """Gauss-Newton on the three law-of-cosines equations (LT Sec. 3.5).
+    """Gauss-Newton on the three law-of-cosines equations (LT Sec. 3.5), in scalar arithmetic (3×3 by Cramer's
+    rule: numpy's per-call overhead dominated the hypothesis loop of RANSAC).
 
     ``lam`` (3,), ``a = (a12, a13, a23)``, ``b = (b12, b13, b23)``.
     """
-    pairs = ((0, 1), (0, 2), (1, 2))
+    l1, l2, l3 = (float(v) for v in lam)
+    a12, a13, a23 = a
+    b12, b13, b23 = b
+    tol = 1e-15 * (a12 + a13 + a23)
     for _ in range(iters):
-        r = np.array([lam[i] ** 2 + lam[j] ** 2 - 2 * b[k] * lam[i] * lam[j] - a[k] for k, (i, j) in enumerate(pairs)])
-        if np.abs(r).sum() < 1e-15 * sum(a):
+        r1 = l1 * l1 + l2 * l2 - 2 * b12 * l1 * l2 - a12
+        r2 = l1 * l1 + l3 * l3 - 2 * b13 * l1 * l3 - a13
+        r3 = l2 * l2 + l3 * l3 - 2 * b23 * l2 * l3 - a23
+        if abs(r1) + abs(r2) + abs(r3) < tol:
             break
-        J = np.zeros((3, 3))
-        for k, (i, j) in enumerate(pairs):
-            J[k, i] = 2 * lam[i] - 2 * b[k] * lam[j]
-            J[k, j] = 2 * lam[j] - 2 * b[k] * lam[i]
-        try:
-            step = np.linalg.solve(J, r)
-        except np.linalg.LinAlgError:
+        # J = [[j11, j12, 0], [j21, 0, j23], [0, j32, j33]]
+        j11, j12 = 2 * l1 - 2 * b12 * l2, 2 * l2 - 2 * b12 * l1
+        j21, j23 = 2 * l1 - 2 * b13 * l3, 2 * l3 - 2 * b13 * l1
+        j32, j33 = 2 * l2 - 2 * b23 * l3, 2 * l3 - 2 * b23 * l2
+        det = -j11 * j23 * j32 - j12 * j21 * j33
+        if det == 0 or not math.isfinite(det):
             break
-        lam = lam - step
-    return lam
+        d1 = (-r1 * j23 * j32 - j12 * (r2 * j33 - j23 * r3)) / det
+        d2 = (j11 * (r2 * j33 - j23 * r3) - r1 * j21 * j33) / det
+        d3 = (-j11 * r2 * j32 - j12 * j21 * r3 + r1 * j21 * j32) / det
+        l1, l2, l3 = l1 - d1, l2 - d2, l3 - d3
+    return np.array([l1, l2, l3])
 
 
 def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
@@ -176,6 +219,17 @@ def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     return _p3p_core(X, y, (a12, a13, a23), d12, d13, c)
 
 
+def _p3p_sample(X, y):
+    """P3P on one RANSAC sample (``X`` (3, 3), unit rays ``y`` (3, 3)): :func:`p3p_bearings` without its input checks;
+    a degenerate sample (collinear or coincident points) has no solution."""
+    d12, d13, d23 = X[0] - X[1], X[0] - X[2], X[1] - X[2]
+    a12, a13, a23 = float(d12 @ d12), float(d13 @ d13), float(d23 @ d23)
+    c = _cross(d12, d13)
+    if min(a12, a13, a23) == 0 or c @ c <= 1e-12 * a12 * a13:
+        return []
+    return _p3p_core(X, y, (a12, a13, a23), d12, d13, c)
+
+
 def _p3p_core(X, y, a, d12, d13, c):
     a12, a13, a23 = a
     b12, b13, b23 = y[0] @ y[1], y[0] @ y[2], y[1] @ y[2]
@@ -185,14 +239,19 @@ def _p3p_core(X, y, a, d12, d13, c):
     M23 = np.array([[0, 0, 0], [0, 1, -b23], [0, -b23, 1]])
     D1 = a23 * M12 - a12 * M23                   # Λᵀ D1 Λ = 0 and Λᵀ D2 Λ = 0 (the scale is gone)
     D2 = a23 * M13 - a13 * M23
-    # det(D1 + γ D2) = c3 γ³ + c2 γ² + c1 γ + c0
-    coeffs = np.array([np.linalg.det(D2), np.sum(D1 * _cofactor(D2)), np.sum(D2 * _cofactor(D1)), np.linalg.det(D1)])
-    coeffs = coeffs / np.abs(coeffs).max()
-    roots = np.roots(coeffs)
+    # det(D1 + γ D2) = c3 γ³ + c2 γ² + c1 γ + c0 (scalar arithmetic: this runs once per RANSAC sample)
+    m1, m2 = D1.ravel().tolist(), D2.ravel().tolist()
+    c1m, c2m = _cofactor_list(m1), _cofactor_list(m2)
+    coeffs = [sum(c2m[i] * m2[i] for i in range(3)), sum(m1[i] * c2m[i] for i in range(9)),
+              sum(m2[i] * c1m[i] for i in range(9)), sum(c1m[i] * m1[i] for i in range(3))]
+    top = max(abs(v) for v in coeffs)
+    if not top > 0:
+        return []
+    c3, c2, c1, c0 = (v / top for v in coeffs)
     best = None
-    for g in roots[np.abs(roots.imag) <= 1e-6 * (1 + np.abs(roots.real))].real:
+    for g in _cubic_real_roots(c3, c2, c1, c0):
         for _ in range(2):                       # polish the root on the cubic
-            f, df = np.polyval(coeffs, g), np.polyval(np.polyder(coeffs), g)
+            f, df = ((c3 * g + c2) * g + c1) * g + c0, (3 * c3 * g + 2 * c2) * g + c1
             if df != 0:
                 g = g - f / df
         w, V = np.linalg.eigh(D1 + g * D2)
@@ -563,14 +622,11 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
         raise ValueError("all world points are collinear (or coincide): the pose is not determined")
     y = bearings(x, K)
 
-    def fit(idx):
-        try:
-            return p3p_bearings(X[idx], y[idx])
-        except ValueError:                      # a collinear sample: no candidate
-            return []
+    def fit(idx):                               # checked once above: the loop calls the kernels
+        return _p3p_sample(X[idx], y[idx])
 
     def errors(model):
-        return reprojection_errors(X, x, K, *model)
+        return _reprojection_errors(X, x, K, *model)
 
     (R, t), inliers, n_iter = ransac(len(X), 3, fit, errors, threshold_px, rng=rng, confidence=confidence,
                                      max_iter=max_iter)
