@@ -70,7 +70,7 @@ def test_sparse_reduced_system_gives_the_dense_step():
     and a system that is not positive definite is refused by both (a rejected step for the LM loop)."""
     from labutils.bundle.reprojection import project_observations
     from labutils.bundle.schur import _damped_step, _normal_blocks, _SchurStructure
-    from labutils.tools.ceres import synthetic_ba_problem
+    from labutils.tools.reference import synthetic_ba_problem
 
     cp, X, ci, pi, x, K = synthetic_ba_problem(40, 15, rng=np.random.default_rng(1))
     u, Jc, Jp = project_observations(cp, X, ci, pi, K[None], jac=True)

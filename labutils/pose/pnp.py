@@ -108,6 +108,9 @@ def _cofactor(A):
     return np.column_stack([_cross(A[:, 1], A[:, 2]), _cross(A[:, 2], A[:, 0]), _cross(A[:, 0], A[:, 1])])
 
 
+_I3 = np.eye(3)
+
+
 def _cofactor_list(m):
     """Cofactors of a 3×3 matrix given as its 9 entries in row order (a list), in the same order."""
     a, b, c, d, e, f, g, h, i = m
@@ -288,9 +291,13 @@ def _p3p_core(X, y, a, d12, d13, c):
             if not np.all(np.isfinite(lam)) or np.any(lam <= 0):
                 continue
             v1, v2 = lam[0] * y[0] - lam[1] * y[1], lam[0] * y[0] - lam[2] * y[2]
-            R = np.column_stack([v1, v2, _cross(v1, v2)]) @ Xm_inv
-            U, _, Vt = np.linalg.svd(R)          # a no-op for exact depths; guards against round-off
-            R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
+            R = np.array([v1, v2, _cross(v1, v2)]).T @ Xm_inv
+            if np.abs(R.T @ R - _I3).max() < 1e-6:      # round-off only: two Newton-Schulz steps to the rotation
+                R = R @ (1.5 * _I3 - 0.5 * (R.T @ R))
+                R = R @ (1.5 * _I3 - 0.5 * (R.T @ R))
+            else:                                # the nearest rotation (SVD)
+                U, _, Vt = np.linalg.svd(R)
+                R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
             t = lam[0] * y[0] - R @ X[0]
             if all(np.abs(R - R2).max() > 1e-9 or np.abs(t - t2).max() > 1e-9 * (1 + np.abs(t).max())
                    for R2, t2 in sols):

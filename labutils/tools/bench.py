@@ -1,4 +1,5 @@
-"""Benchmarks (printed, never asserted): ``python -m labutils.bench ba [--quick | --all]`` and
+"""Benchmarks (printed, never asserted): ``python -m labutils.bench ba [--quick | --all]``,
+``python -m labutils.bench pnp`` (ours against OpenCV's ``solvePnPRansac``, same problems, same run) and
 ``python -m labutils.bench notebooks [NOTEBOOK ...]``.
 
 ``notebooks`` runs each notebook top to bottom in a fresh kernel (as nbval does; nothing is saved) and prints its
@@ -23,7 +24,7 @@ Ceres, the reference, runs beside ours when pycolmap is installed (an optional e
 not a workbook requirement): :func:`bench_ceres` times both on one thread, in turn, on ladybug, the dinosaur
 (plain least squares, intrinsics held) and synthetic sequences of 10 to 300 cameras (time per step against
 observations and the fitted slope), and prints both times, both costs and the ratios
-(:mod:`labutils.tools.ceres`). Without pycolmap the section says ``"ceres": "not installed"``.
+(:mod:`labutils.tools.reference`). Without pycolmap the section says ``"ceres": "not installed"``.
 
 The README's results table quotes what this prints on the 2-core workbook machine. Progress goes to stderr, one
 JSON document to stdout (``python -m labutils.bench ba | python -m json.tool`` works).
@@ -49,7 +50,7 @@ from ..data.bal import read_bal
 from ..data.loaders import load_scene
 from ..data.paths import find_data
 from ..twoview.triangulation import triangulate_multiview
-from .ceres import ceres_available, compare_with_ceres, scaling_run
+from .reference import ceres_available, compare_pnp_with_opencv, compare_with_ceres, scaling_run
 
 
 def dino_problem(*, rng, scene=None):
@@ -379,6 +380,9 @@ def _parser():
     size = ba.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_true", help="LM-Schur and scipy-analytic only, <= 200 scipy evaluations")
     size.add_argument("--all", action="store_true", help="also the tight-LSMR scipy variants on ladybug (~20 min each)")
+    sub.add_parser("pnp", help="pnp_ransac against OpenCV's solvePnPRansac (AP3P) on the same problems",
+                   description="Time pnp_ransac and OpenCV's solvePnPRansac (AP3P), one thread each, on 20 problems "
+                               "of 40-200 points with 30 % outliers; print both, their accuracy and the ratio.")
     nbs = sub.add_parser("notebooks", help="run each notebook in a fresh kernel and time it against the 90 s budget",
                          description="Run notebooks top to bottom (nothing is saved) and print their seconds, "
                                      "slowest cell and whether each is within the 90 s budget.")
@@ -395,6 +399,9 @@ def main(argv=None):
     args = _parser().parse_args(argv)
     machine = dict(cpus=os.cpu_count(), OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS"),
                    load_average=os.getloadavg())
+    if args.what == "pnp":
+        print(json.dumps(dict(machine=machine, pnp=compare_pnp_with_opencv()), indent=1))
+        return 0
     if args.what == "notebooks":
         paths = [Path(p) for p in args.paths] or sorted(NOTEBOOK_DIR.glob("[0-9][0-9]_*.ipynb"))
         for p in paths:

@@ -1,6 +1,7 @@
-"""Ceres, the reference bundle adjuster, through pycolmap (an optional extra: ``pip install -e .[bench]``).
+"""The references the benchmarks time ours against, in the same run: Ceres, the reference bundle adjuster, through
+pycolmap (an optional extra: ``pip install -e .[bench]``), and OpenCV's ``solvePnPRansac`` for PnP-RANSAC.
 
-Only the benchmarks use it (:mod:`labutils.tools.bench`): it runs COLMAP's Ceres bundle adjuster on the same
+Only the benchmarks use Ceres (:mod:`labutils.tools.bench`): it runs COLMAP's Ceres bundle adjuster on the same
 problem our solver gets, with the same cost (plain least squares on the pixel residuals), the same frozen
 parameters, one thread, and the stopping rule of ours (relative cost decrease ``tol``, step ``1e-2 tol``), so that
 both times come from one run on one machine. Nothing of the workbook needs it; :func:`ceres_available` says
@@ -280,3 +281,78 @@ def scaling_run(sizes=(10, 30, 100, 300), *, points_per_camera: int = 100, repea
             slope[who] = round(float(np.polyfit(n, np.log([r[who]["ms_per_step"] for r in runs]), 1)[0]), 3)
     return dict(problem=f"synthetic sequences, {points_per_camera} new points per camera, tracks of 2-8 views, "
                         "plain least squares, 6 parameters per camera (K known)", runs=runs, slope=slope)
+
+
+def compare_pnp_with_opencv(sizes=(40, 80, 120, 160, 200), *, per_size: int = 4, outlier_ratio: float = 0.3,
+                            repeats: int = 3, threshold_px: float = 2.0, seed: int = 0) -> dict:
+    """:func:`labutils.pose.pnp_ransac` against OpenCV's ``solvePnPRansac`` (AP3P, one thread) on the same problems.
+
+    Each problem: ``n`` points 5 to 7 units in front of a camera (f = 800 px, 640 × 480), 0.5 px noise, a fraction
+    ``outlier_ratio`` of the pixels replaced by uniform ones; both with the same threshold and confidence 0.9999.
+    Times are CPU seconds per call (median over the problems, then over ``repeats`` passes, passes alternating).
+
+    Returns
+    -------
+    dict
+        ``ours`` and ``opencv``: ``ms_per_call``, ``median_rotation_error_deg``, ``inlier_recall`` (true inliers
+        found), ``failures`` (no pose, or a rotation error above 1°); ``ratio`` (ours over OpenCV).
+    """
+    import cv2
+
+    from ..core.geometry import rotation_from_angle_axis
+    from ..pose.pnp import pnp_ransac
+
+    rng = np.random.default_rng(seed)
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    problems = []
+    for n in sizes:
+        for _ in range(per_size):
+            R = rotation_from_angle_axis(0.3 * rng.normal(size=3))
+            t = 0.3 * rng.normal(size=3)
+            Xc = rng.uniform(-1, 1, (n, 3)) + [0, 0, 6]
+            x = Xc[:, :2] / Xc[:, 2:] * 800 + [320, 240] + 0.5 * rng.normal(size=(n, 2))
+            out = rng.random(n) < outlier_ratio
+            x[out] = rng.uniform([0, 0], [640, 480], (out.sum(), 2))
+            problems.append(((Xc - t) @ R, x, R, ~out))
+    cv2.setNumThreads(1)
+
+    def rot_err(Ra, Rb):
+        return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1, 1))))
+
+    def ours(i, X, x):
+        res = pnp_ransac(X, x, K, rng=np.random.default_rng(i), threshold_px=threshold_px)
+        return res.R, res.inliers
+
+    def opencv(i, X, x):
+        ok, rvec, tvec, inl = cv2.solvePnPRansac(X, x, K, None, reprojectionError=threshold_px, confidence=0.9999,
+                                                 iterationsCount=10000, flags=cv2.SOLVEPNP_AP3P)
+        mask = np.zeros(len(X), bool)
+        if inl is not None:
+            mask[inl.ravel()] = True
+        return (cv2.Rodrigues(rvec)[0] if ok else None), mask
+
+    out = {}
+    passes = {"ours": [], "opencv": []}
+    for _ in range(repeats):
+        for name, fn in (("ours", ours), ("opencv", opencv)):
+            times, errs, recall, fails = [], [], [], 0
+            for i, (X, x, R, inl) in enumerate(problems):
+                c = time.process_time()
+                try:
+                    R_est, mask = fn(i, X, x)
+                except ValueError:
+                    R_est, mask = None, np.zeros(len(X), bool)
+                times.append(time.process_time() - c)
+                e = rot_err(R_est, R) if R_est is not None else np.inf
+                fails += not e < 1.0
+                errs.append(e)
+                recall.append(float((mask & inl).sum() / inl.sum()))
+            passes[name].append(dict(ms_per_call=1e3 * float(np.median(times)),
+                                     median_rotation_error_deg=float(np.median(errs)),
+                                     inlier_recall=float(np.mean(recall)), failures=fails))
+    for name, rows in passes.items():
+        out[name] = dict(rows[0], ms_per_call=round(float(np.median([r["ms_per_call"] for r in rows])), 3))
+    out["ratio"] = round(out["ours"]["ms_per_call"] / out["opencv"]["ms_per_call"], 2)
+    out["problems"] = (f"{len(problems)} problems of {min(sizes)}-{max(sizes)} points, {outlier_ratio:.0%} outliers, "
+                       f"threshold {threshold_px} px, confidence 0.9999, one thread")
+    return out
