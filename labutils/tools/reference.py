@@ -15,11 +15,13 @@ COLMAP's ``PINHOLE`` with the intrinsics held.
 import importlib.util
 import time
 
+import cv2
 import numpy as np
 
 from ..bundle.adjust import bundle_adjust_params
 from ..bundle.reprojection import reprojection_residuals
 from ..core.geometry import angle_axis_from_rotation, rotation_from_angle_axis
+from ..pose.pnp import pnp_ransac
 
 _FLIP = np.diag([-1.0, 1.0, -1.0])      # BAL camera frame -> COLMAP's (z forward)
 
@@ -297,11 +299,6 @@ def compare_pnp_with_opencv(sizes=(40, 80, 120, 160, 200), *, per_size: int = 4,
         ``ours`` and ``opencv``: ``ms_per_call``, ``median_rotation_error_deg``, ``inlier_recall`` (true inliers
         found), ``failures`` (no pose, or a rotation error above 1°); ``ratio`` (ours over OpenCV).
     """
-    import cv2
-
-    from ..core.geometry import rotation_from_angle_axis
-    from ..pose.pnp import pnp_ransac
-
     rng = np.random.default_rng(seed)
     K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
     problems = []
