@@ -23,7 +23,7 @@ from ..core.validation import (
     as_rotation,
     as_vector3,
 )
-from .p3p_scalar import _cofactor_list, _cubic_real_roots, _quadratic_roots, _refine_lambdas
+from .p3p_scalar import _lambda_twist
 
 # --------------------------------------------------------------------------------------------- helpers
 
@@ -103,9 +103,6 @@ def _cross(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-_I3 = np.eye(3)
-
-
 def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     """All poses that map three world points onto three viewing rays: Lambda Twist P3P (LT Alg. 1).
 
@@ -170,75 +167,8 @@ def _p3p_sample(X, y):
 
 
 def _p3p_core(X, y, a, d12, d13, c):
-    a12, a13, a23 = a
-    b12, b13, b23 = y[0] @ y[1], y[0] @ y[2], y[1] @ y[2]
-    # the law of cosines as quadratic forms: Λᵀ Mij Λ = aij
-    M12 = np.array([[1, -b12, 0], [-b12, 1, 0], [0, 0, 0]])
-    M13 = np.array([[1, 0, -b13], [0, 0, 0], [-b13, 0, 1]])
-    M23 = np.array([[0, 0, 0], [0, 1, -b23], [0, -b23, 1]])
-    D1 = a23 * M12 - a12 * M23                   # Λᵀ D1 Λ = 0 and Λᵀ D2 Λ = 0 (the scale is gone)
-    D2 = a23 * M13 - a13 * M23
-    # det(D1 + γ D2) = c3 γ³ + c2 γ² + c1 γ + c0 (scalar arithmetic: this runs once per RANSAC sample)
-    m1, m2 = D1.ravel().tolist(), D2.ravel().tolist()
-    c1m, c2m = _cofactor_list(m1), _cofactor_list(m2)
-    coeffs = [sum(c2m[i] * m2[i] for i in range(3)), sum(m1[i] * c2m[i] for i in range(9)),
-              sum(m2[i] * c1m[i] for i in range(9)), sum(c1m[i] * m1[i] for i in range(3))]
-    top = max(abs(v) for v in coeffs)
-    if not top > 0:
-        return []
-    c3, c2, c1, c0 = (v / top for v in coeffs)
-    best = None
-    for g in _cubic_real_roots(c3, c2, c1, c0):
-        for _ in range(2):                       # polish the root on the cubic
-            f, df = ((c3 * g + c2) * g + c1) * g + c0, (3 * c3 * g + 2 * c2) * g + c1
-            if df != 0:
-                g = g - f / df
-        w, V = np.linalg.eigh(D1 + g * D2)
-        order = np.argsort(np.abs(w))            # w[order[0]] ≈ 0: D0 is singular
-        s1, s2 = w[order[2]], w[order[1]]
-        if s1 * s2 >= 0:                         # semidefinite: a pair of complex lines, skip
-            continue
-        quality = abs(s2 / s1)
-        if best is None or quality > best[0]:
-            best = (quality, g, s1, s2, V[:, order[2]], V[:, order[1]])
-    if best is None:
-        return []
-    _, g, s1, s2, e1, e2 = best
-    Q = D2 if abs(g) < 1 else D1                 # a conic of the pencil independent of D0
-    Msum, asum = M12 + M13 + M23, a12 + a13 + a23
-    Xm_inv = np.linalg.inv(np.column_stack([d12, d13, c]))
-    sols = []
-    s = np.sqrt(-s2 / s1)
-    for u in (e1 - s * e2, e1 + s * e2):         # σ1 (e1·Λ)² + σ2 (e2·Λ)² = 0  ⇒  (e1 ∓ s e2)·Λ = 0
-        k = int(np.argmax(np.abs(u)))
-        i, j = [m for m in range(3) if m != k]
-        p, q = np.zeros(3), np.zeros(3)          # Λ ∝ p + τ q with τ = λj / λi
-        p[i], p[k] = 1.0, -u[i] / u[k]
-        q[j], q[k] = 1.0, -u[j] / u[k]
-        A, B, C = q @ Q @ q, 2 * p @ Q @ q, p @ Q @ p
-        for tau in _quadratic_roots(A, B, C):
-            if tau <= 0:
-                continue
-            v = p + tau * q
-            if v[k] <= 0:
-                continue
-            lam = v * np.sqrt(asum / (v @ Msum @ v))
-            lam = _refine_lambdas(lam, (a12, a13, a23), (b12, b13, b23))
-            if not np.all(np.isfinite(lam)) or np.any(lam <= 0):
-                continue
-            v1, v2 = lam[0] * y[0] - lam[1] * y[1], lam[0] * y[0] - lam[2] * y[2]
-            R = np.array([v1, v2, _cross(v1, v2)]).T @ Xm_inv
-            if np.abs(R.T @ R - _I3).max() < 1e-6:      # round-off only: two Newton-Schulz steps to the rotation
-                R = R @ (1.5 * _I3 - 0.5 * (R.T @ R))
-                R = R @ (1.5 * _I3 - 0.5 * (R.T @ R))
-            else:                                # the nearest rotation (SVD)
-                U, _, Vt = np.linalg.svd(R)
-                R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
-            t = lam[0] * y[0] - R @ X[0]
-            if all(np.abs(R - R2).max() > 1e-9 or np.abs(t - t2).max() > 1e-9 * (1 + np.abs(t).max())
-                   for R2, t2 in sols):
-                sols.append((R, t))
-    return sols
+    """Lambda Twist on a checked sample (:func:`labutils.pose.p3p_scalar._lambda_twist`, scalar arithmetic)."""
+    return _lambda_twist(X, y, a, d12, d13, c)
 
 
 def p3p(X: ArrayLike, x: ArrayLike, K: ArrayLike) -> list:
