@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from labutils.bundle.reprojection import reprojection_residuals
 from labutils.core.synthetic import make_scene, perturb_cameras
 from labutils.tools.bench import SOLVERS, subproblem, time_per_iteration, time_solvers
 
@@ -123,3 +124,49 @@ def test_notebooks_default_to_the_workbook_s_notebooks():
     from labutils.tools.bench import NOTEBOOK_DIR
     assert NOTEBOOK_DIR == Path(__file__).resolve().parents[1] / "notebooks"
     assert len(list(NOTEBOOK_DIR.glob("[0-9][0-9]_*.ipynb"))) >= 15
+
+
+# ---------------------------------------------------------------- the references: Ceres (optional) and OpenCV
+
+def test_compare_with_ceres_says_when_ceres_is_missing(monkeypatch):
+    from labutils.tools import reference
+
+    monkeypatch.setattr(reference, "ceres_available", lambda: False)
+    pb = reference.synthetic_ba_problem(6, 15, rng=np.random.default_rng(0))
+    row = reference.compare_with_ceres(pb, repeats=1)
+    assert row["ceres"].startswith("not installed") and "ratio_cpu" not in row
+    assert row["ours"]["cost_final"] > 0 and row["ours"]["steps"] >= 1
+    run = reference.scaling_run((5, 8), points_per_camera=15)
+    assert [r["n_cameras"] for r in run["runs"]] == [5, 8] and set(run["slope"]) == {"ours"}
+
+
+@pytest.mark.skipif(not __import__("labutils.tools.reference", fromlist=["x"]).ceres_available(),
+                    reason="pycolmap (the optional extra [bench]) is not installed")
+@pytest.mark.parametrize("model", ["pinhole", "bal"])
+def test_ceres_solves_the_same_problem(model):
+    """Ceres through pycolmap minimises our cost: the BAL camera turned into COLMAP's frame and back, the pinhole
+    camera with its intrinsics held; both reach the same minimum (our cost at Ceres' answer)."""
+    from labutils.bundle.adjust import bundle_adjust_params
+    from labutils.tools.reference import ceres_bundle_adjust, synthetic_ba_problem
+
+    cp, X, ci, pi, x, K = synthetic_ba_problem(8, 20, rng=np.random.default_rng(3))
+    if model == "bal":             # the same scene as a BAL problem: camera looking down -z, f, k1, k2
+        F = np.diag([-1.0, 1.0, -1.0])
+        from labutils.core.geometry import angle_axis_from_rotation, rotation_from_angle_axis
+        R = F @ rotation_from_angle_axis(cp[:, :3])
+        cp = np.hstack([angle_axis_from_rotation(R), cp[:, 3:6] @ F, np.tile([500.0, 0.01, -0.001], (len(cp), 1))])
+        x, K = (x - [320, 240]) * [-1, 1], None
+    ours = bundle_adjust_params(cp, X, ci, pi, x, K, max_iter=200)
+    out = ceres_bundle_adjust(cp, X, ci, pi, x, K, max_iter=200)
+    r = reprojection_residuals(out["camera_params"], out["points_3d"], ci, pi, x, K)
+    assert np.isclose(out["ceres_cost_final"], 0.5 * r @ r, rtol=1e-6)
+    assert abs(0.5 * r @ r / ours.cost_final - 1) < 1e-3
+
+
+def test_pnp_against_opencv_rows():
+    from labutils.tools.reference import compare_pnp_with_opencv
+
+    out = compare_pnp_with_opencv((40,), per_size=2, repeats=1)
+    for who in ("ours", "opencv"):
+        assert out[who]["failures"] == 0 and out[who]["inlier_recall"] > 0.9 and out[who]["ms_per_call"] > 0
+    assert out["ratio"] > 0

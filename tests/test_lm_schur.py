@@ -63,3 +63,25 @@ def test_bad_problem_is_refused(problem):
         schur_step(cp, X, ci, pi, x[:-1], K, mu=1.0)
     with pytest.raises(ValueError, match="camera_params"):
         schur_step(cp[:, :5], X, ci, pi, x, K, mu=1.0)
+
+
+def test_sparse_reduced_system_gives_the_dense_step():
+    """The sparse L D Lᵀ of the reduced camera system (large, banded problems) and dense Cholesky give one step,
+    and a system that is not positive definite is refused by both (a rejected step for the LM loop)."""
+    from labutils.bundle.reprojection import project_observations
+    from labutils.bundle.schur import _damped_step, _normal_blocks, _SchurStructure
+    from labutils.tools.reference import synthetic_ba_problem
+
+    cp, X, ci, pi, x, K = synthetic_ba_problem(40, 15, rng=np.random.default_rng(1))
+    u, Jc, Jp = project_observations(cp, X, ci, pi, K[None], jac=True)
+    steps = []
+    for dense in (True, False):
+        st = _SchurStructure(ci, pi, len(cp), len(X), 6, dense=dense)
+        U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, u - x)
+        Dc, Dp = np.diagonal(U, axis1=1, axis2=2), np.diagonal(Vp, axis1=1, axis2=2)
+        steps.append(_damped_step(st, U, Vp, W, gc, gp, Dc, Dp, 1e-3, ci, pi))
+        with pytest.raises(np.linalg.LinAlgError):
+            _damped_step(st, -U, Vp, W, gc, gp, Dc, Dp, 1e-3, ci, pi)
+    (dc, dp, S, _), (dc_s, dp_s, S_s, _) = steps
+    assert np.abs(S_s.toarray() - S).max() < 1e-9 * np.abs(S).max()
+    assert np.abs(dc_s - dc).max() < 1e-8 * np.abs(dc).max() and np.abs(dp_s - dp).max() < 1e-8 * np.abs(dp).max()

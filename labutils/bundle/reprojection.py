@@ -125,7 +125,7 @@ def project_observations(cp, X, ci, pi, Ks, jac=False):
     """
     n, k = ci.shape[0], cp.shape[1]
     Ro = rotation_from_angle_axis(cp[:, :3])[ci]                 # (n, 3, 3)
-    RX = (Ro @ X[pi][:, :, None])[:, :, 0]                        # R X
+    RX = np.einsum("nij,nj->ni", Ro, X[pi])                      # R X
     P = RX + cp[ci, 3:6]                                          # x_cam = R X + t
     iz = 1.0 / P[:, 2]
     if Ks is not None:                                            # pinhole: x = K x_cam, dehomogenised
@@ -145,25 +145,26 @@ def project_observations(cp, X, ci, pi, Ks, jac=False):
         u = (f * d)[:, None] * p
     if not jac:
         return u
-    # ∂u/∂x_cam (n, 2, 3) through the normalised point xn = x_cam[:2] / z
-    dn = np.zeros((n, 2, 3))
-    dn[:, 0, 0] = dn[:, 1, 1] = iz
-    if Ks is not None:
-        dn[:, :, 2] = -xn * iz[:, None]
-        du_dP = A @ dn
-    else:                                                         # p = -xn
-        dn[:, :, 2] = p * iz[:, None]
-        dd_dp = (2 * (k1 + 2 * k2 * r2))[:, None] * p             # ∂d/∂p, (n, 2)
-        du_dp = (f * d)[:, None, None] * np.eye(2) + f[:, None, None] * p[:, :, None] * dd_dp[:, None, :]
-        du_dP = -(du_dp @ dn)
-    # ∂x_cam/∂ω = -[R X]× J_l(ω): row g of ∂u/∂x_cam times -[a]× is (a × g)ᵀ
-    a = RX[:, None, :]
-    g0, g1, g2 = du_dP[:, :, 0], du_dP[:, :, 1], du_dP[:, :, 2]
-    G = np.stack([a[..., 1] * g2 - a[..., 2] * g1, a[..., 2] * g0 - a[..., 0] * g2,
-                  a[..., 0] * g1 - a[..., 1] * g0], axis=-1)      # (n, 2, 3)
+    # ∂u/∂x_cam (n, 2, 3) through the normalised point xn = x_cam[:2] / z, written straight into the columns of t
+    # (∂x_cam/∂t = I), element-wise: batched products of tiny matrices are slow in numpy
     Jc = np.empty((n, 2, k))
+    du_dP = Jc[:, :, 3:6]
+    if Ks is not None:                                            # A [[1/z, 0, -xn0/z], [0, 1/z, -xn1/z]]
+        Aiz = (A if A.ndim == 3 else A[None]) * iz[:, None, None]
+        du_dP[:, :, :2] = Aiz
+        du_dP[:, :, 2] = -np.einsum("nab,nb->na", Aiz, xn)
+    else:                                                         # ∂u/∂p = s I + p qᵀ, p = -xn
+        s, q = f * d, (2 * f * (k1 + 2 * k2 * r2))[:, None] * p
+        du_dP[:, :, :2] = -(s[:, None, None] * np.eye(2) + p[:, :, None] * q[:, None, :]) * iz[:, None, None]
+        du_dP[:, :, 2] = -p * ((s + (q * p).sum(1)) * iz)[:, None]
+    # ∂x_cam/∂ω = -[R X]× J_l(ω): row g of ∂u/∂x_cam times -[a]× is (a × g)ᵀ
+    a0, a1, a2 = RX[:, 0:1], RX[:, 1:2], RX[:, 2:3]
+    g0, g1, g2 = du_dP[:, :, 0], du_dP[:, :, 1], du_dP[:, :, 2]
+    G = np.empty((n, 2, 3))
+    G[:, :, 0] = a1 * g2 - a2 * g1
+    G[:, :, 1] = a2 * g0 - a0 * g2
+    G[:, :, 2] = a0 * g1 - a1 * g0
     Jc[:, :, 0:3] = G @ left_jacobian_so3(cp[:, :3])[ci]
-    Jc[:, :, 3:6] = du_dP                                         # ∂x_cam/∂t = I
     if Ks is None:
         Jc[:, :, 6] = d[:, None] * p
         Jc[:, :, 7] = (f * r2)[:, None] * p

@@ -2,8 +2,12 @@
 
 The loop is the package's one (:mod:`labutils.core.lm`: Marquardt's diagonal scaling, Nielsen's damping update); the 3×3
 point blocks are eliminated by the Schur complement (Triggs et al. 2000, Sec. 6.1; H&Z Sec. A6.3) and the
-reduced camera system is solved by dense Cholesky. Robust losses by iteratively reweighted least squares, then
-the loss's second-order curvature near the optimum (:mod:`labutils.core.robust`). Called through
+reduced camera system is solved by dense Cholesky, or, when it is large and its block pattern sparse (long
+sequences, where a camera shares points with a few neighbours only), by a sparse ``L D Lᵀ`` factorisation with a
+fill-reducing ordering. Everything per observation, per point and per camera is batched (no Python loop over them);
+the index bookkeeping (sums by camera and point, the pairs of observations feeding each block of the reduced
+system) is computed once per problem and reused by every iteration. Robust losses by iteratively reweighted least
+squares, then the loss's second-order curvature near the optimum (:mod:`labutils.core.robust`). Called through
 :func:`labutils.bundle.bundle_adjust` (``solver='lm-schur'``), which checks the input and fixes the gauge.
 :func:`schur_step` computes one damped step of the same solver on its own (notebook 04 derives it in cells and
 compares).
@@ -14,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+import scipy.sparse.linalg
 from numpy.typing import ArrayLike
 
 from ..core.lm import minimise
@@ -38,41 +43,72 @@ def _inv_sym3(A):
     return inv / det[:, None, None]
 
 
+class _Groups:
+    """Sums of per-observation arrays by camera or by point: one sparse indicator matrix (groups × observations)
+    built once per problem, applied to the flattened blocks (faster than ``np.add.reduceat`` or ``np.add.at``)."""
+
+    def __init__(self, idx, n_groups):
+        n = idx.shape[0]
+        self.A = sp.csr_matrix((np.ones(n), (idx, np.arange(n))), shape=(n_groups, n))
+        self.order = np.argsort(idx, kind="stable")
+
+    def sum(self, a):
+        """``(n, ...) -> (n_groups, ...)``: the rows of ``a`` summed by group."""
+        return (self.A @ a.reshape(a.shape[0], -1)).reshape((-1,) + a.shape[1:])
+
+
 class _SchurStructure:
-    """Index bookkeeping for the reduced camera system, computed once per problem."""
+    """The symbolic part of the normal equations and of the reduced camera system, computed once per problem and
+    reused by every iteration: the sums by camera and by point, the pairs of observations of one point sorted by
+    the camera block they feed, and the block pattern of the reduced camera matrix."""
 
-    CHUNK = 8192
+    CHUNK = 4096          # pairs per batch of the reduced system's products (stays in cache)
+    DENSE_MAX = 600       # reduced systems up to this size (V k) are factored dense
 
-    def __init__(self, ci, pi, V, M):
+    def __init__(self, ci, pi, V, M, k=6, dense=None):
         n = ci.shape[0]
         obs = np.arange(n)
-        self.A_cam = sp.csr_matrix((np.ones(n), (ci, obs)), shape=(V, n))      # sums observations per camera
-        self.A_pt = sp.csr_matrix((np.ones(n), (pi, obs)), shape=(M, n))       # ... per point
-        # pairs of observations of the same point, o1 <= o2 (the reduced system is symmetric)
-        order = np.argsort(pi, kind="stable")
+        self.cam, self.pt = _Groups(ci, V), _Groups(pi, M)
+        # pairs of observations of the same point, o1 before o2 in its list
+        order = self.pt.order
         counts = np.bincount(pi, minlength=M)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        starts = np.cumsum(counts) - counts
         pos = np.empty(n, np.int64)
-        pos[order] = np.arange(n)                                 # rank of each observation in its point's list
-        rank = pos - starts[pi]
-        n_partners = counts[pi] - rank                            # partners at or after itself
+        pos[order] = obs                                          # rank of each observation in the point order
+        n_partners = counts[pi] - (pos - starts[pi]) - 1         # partners after itself
         o1 = np.repeat(obs, n_partners)
-        first = np.repeat(pos, n_partners)
+        first = np.repeat(pos + 1, n_partners)
         o2 = order[first + (np.arange(o1.size) - np.repeat(np.cumsum(n_partners) - n_partners, n_partners))]
-        off = o1 != o2                                            # the diagonal pairs are the observations
-        o1, o2 = o1[off], o2[off]
+        swap = ci[o1] > ci[o2]                                    # block (c1, c2) with c1 <= c2 (S is symmetric)
+        o1, o2 = np.where(swap, o2, o1), np.where(swap, o1, o2)
         blk = ci[o1] * V + ci[o2]
-        # chunks of pairs small enough to stay in cache; per chunk an indicator matrix that sums
-        # each pair's k×k block into its (camera, camera) block of the reduced system
+        by_blk = np.argsort(blk, kind="stable")
+        o1, o2, blk = o1[by_blk], o2[by_blk], blk[by_blk]
+        bstart = np.flatnonzero(np.r_[True, blk[1:] != blk[:-1]]) if blk.size else np.zeros(0, np.int64)
+        ublk = blk[bstart]
+        # batches of about CHUNK pairs, cut at block boundaries: (o1, o2, block starts in the batch, blocks)
         self.chunks = []
-        for s in range(0, o1.size, self.CHUNK):
-            sl = slice(s, s + self.CHUNK)
-            m = o1[sl].size
-            A = sp.csr_matrix((np.ones(m), (blk[sl], np.arange(m))), shape=(V * V, m))
-            self.chunks.append((o1[sl], o2[sl], A))
-        self.A_diag = sp.csr_matrix((np.ones(n), (ci * (V + 1), obs)), shape=(V * V, n))
-        self.n_pairs = o1.size
-        self.V = V
+        at = np.searchsorted(bstart, np.arange(0, blk.size, self.CHUNK))    # first block starting at or after
+        cuts = np.unique(np.r_[bstart[np.minimum(at, bstart.size - 1)][at < bstart.size], blk.size])
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            u0, u1 = np.searchsorted(bstart, [a, b])
+            ind = sp.csr_matrix((np.ones(b - a), np.searchsorted(bstart[u0:u1], np.arange(a, b), "right") - 1,
+                                 np.arange(b - a + 1)), shape=(b - a, u1 - u0)).T.tocsr()   # blocks × pairs
+            self.chunks.append((o1[a:b], o2[a:b], ind, slice(u0, u1)))
+        self.n_blocks = ublk.size
+        r, c = ublk // V, ublk % V
+        self.same = np.flatnonzero(r == c)                        # a point seen twice by one camera
+        self.same_cam = r[self.same]
+        off = np.flatnonzero(r != c)
+        self.off, self.off_r, self.off_c = off, r[off], c[off]
+        self.V, self.k, self.n_pairs = V, k, o1.size
+        self.dense = V * k <= self.DENSE_MAX or 2 * off.size + V > 0.3 * V * V if dense is None else dense
+        if not self.dense:                                        # the block pattern of S, rows then columns
+            rows = np.r_[np.arange(V), self.off_r, self.off_c]
+            cols = np.r_[np.arange(V), self.off_c, self.off_r]
+            self.bsr_order = np.lexsort((cols, rows))
+            self.bsr_indices = cols[self.bsr_order]
+            self.bsr_indptr = np.searchsorted(rows[self.bsr_order], np.arange(V + 1))
 
 
 def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter, tol, verbose):
@@ -84,7 +120,9 @@ def lm_schur(cp0, X0, ci, pi, x, Ks, free_cam, free_pt, loss, f_scale, max_iter,
     """
     V, k = cp0.shape
     M = X0.shape[0]
-    st = _SchurStructure(ci, pi, V, M)
+    by_cam = np.argsort(ci, kind="stable")                        # observations by camera: sums by camera in place
+    ci, pi, x = ci[by_cam], pi[by_cam], x[by_cam]
+    st = _SchurStructure(ci, pi, V, M, k)
     mask_c = free_cam[ci].astype(float)[:, None, :]                 # zero the frozen columns
     mask_p = free_pt[pi].astype(float)[:, None, None]
     frozen_c, frozen_p = ~free_cam, ~free_pt
@@ -166,41 +204,70 @@ def _normal_blocks(st, Jc, Jp, r):
     Returns ``U (V, k, k)`` (camera blocks), ``Vp (M, 3, 3)`` (point blocks), ``W (n, k, 3)`` (one camera-point
     block per observation), ``gc (V, k)`` and ``gp (M, 3)`` (the gradient ``Jᵀr``).
     """
-    n, _, k = Jc.shape
     JcT = np.swapaxes(Jc, 1, 2)
-    U = (st.A_cam @ (JcT @ Jc).reshape(-1, k * k)).reshape(-1, k, k)            # camera blocks
-    Vp = (st.A_pt @ (np.swapaxes(Jp, 1, 2) @ Jp).reshape(-1, 9)).reshape(-1, 3, 3)   # point blocks
-    W = JcT @ Jp                                                # (n, k, 3) camera-point blocks
-    gc = st.A_cam @ np.einsum("nai,na->ni", Jc, r)              # (V, k)
-    gp = st.A_pt @ np.einsum("nai,na->ni", Jp, r)               # (M, 3)
+    U = st.cam.sum(JcT @ Jc)                                     # camera blocks
+    Vp = st.pt.sum(np.swapaxes(Jp, 1, 2) @ Jp)                   # point blocks
+    W = JcT @ Jp                                                 # (n, k, 3) camera-point blocks
+    gc = st.cam.sum(np.einsum("nai,na->ni", Jc, r))              # (V, k)
+    gp = st.pt.sum(np.einsum("nai,na->ni", Jp, r))               # (M, 3)
     return U, Vp, W, gc, gp
 
 
-def _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c=None, frozen_p=None):
+def _damped_step(st, U, Vp, W, gc, gp, Dc, Dp, mu, ci, pi, frozen_c=None, frozen_p=None, dense=None):
     """One damped Gauss–Newton step by the Schur complement: ``(dc (V, k), dp (M, 3), S, rhs)``.
 
     Solves ``(JᵀJ + μ D) δ = -Jᵀr`` with ``D = diag(Dc, Dp)``: the 3×3 point blocks inverted in closed form,
-    the reduced camera system ``S δc = rhs`` by dense Cholesky (raises ``LinAlgError`` when S is not positive
-    definite), then back-substitution ``δp = V⁻¹(-gp - Wᵀ δc)``. Frozen parameters get a zero step.
+    the reduced camera system ``S δc = rhs`` by Cholesky — dense, or sparse (a symmetric sparse LU without
+    pivoting, which is Cholesky's ``L D Lᵀ``) when the system is large and its block pattern sparse (``st.dense``,
+    or ``dense``) — then back-substitution ``δp = V⁻¹(-gp - Wᵀ δc)``. Raises ``LinAlgError`` when ``S`` is not
+    positive definite. Frozen parameters get a zero step.
     """
     V, k = gc.shape
+    dense = st.dense if dense is None else dense
     Ua = U.copy()
     Ua[:, np.arange(k), np.arange(k)] += mu * Dc
     Va = Vp.copy()
     Va[:, np.arange(3), np.arange(3)] += mu * Dp
     Vinv = _inv_sym3(Va)
-    Y = W @ Vinv[pi]                                            # W V⁻¹ per observation, (n, k, 3)
-    S = -_reduced_camera_blocks(st, Y, W)
-    S += _block_diag_dense(Ua)
-    rhs = -(gc - st.A_cam @ np.einsum("nij,nj->ni", Y, gp[pi])).ravel()
-    dc = scipy.linalg.cho_solve(scipy.linalg.cho_factor(S, lower=True, check_finite=False), rhs,
-                                check_finite=False).reshape(V, k)
+    Y = W @ Vinv[pi]                                             # W V⁻¹ per observation, (n, k, 3)
+    diag, off = _reduced_camera_blocks(st, Y, W)
+    diag = Ua - diag
+    off = -off
+    if dense:
+        S = np.zeros((V, k, V, k))
+        S[np.arange(V), :, np.arange(V), :] = diag
+        S[st.off_r, :, st.off_c, :] = off
+        S[st.off_c, :, st.off_r, :] = np.swapaxes(off, 1, 2)
+        S = S.reshape(V * k, V * k)
+    else:
+        data = np.concatenate([diag, off, np.swapaxes(off, 1, 2)])[st.bsr_order]
+        S = sp.bsr_matrix((data, st.bsr_indices, st.bsr_indptr), shape=(V * k, V * k))
+    rhs = -(gc - st.cam.sum(np.einsum("nij,nj->ni", Y, gp[pi]))).ravel()
+    dc = (_cholesky_solve(S, rhs) if dense else _sparse_spd_solve(S, rhs)).reshape(V, k)
     if frozen_c is not None:
         dc[frozen_c] = 0.0
-    dp = np.einsum("mij,mj->mi", Vinv, -gp - st.A_pt @ np.einsum("nij,ni->nj", W, dc[ci]))
+    dp = np.einsum("mij,mj->mi", Vinv, -gp - st.pt.sum(np.einsum("nij,ni->nj", W, dc[ci])))
     if frozen_p is not None:
         dp[frozen_p] = 0.0
     return dc, dp, S, rhs
+
+
+def _cholesky_solve(S, rhs):
+    return scipy.linalg.cho_solve(scipy.linalg.cho_factor(S, lower=True, check_finite=False), rhs,
+                                  check_finite=False)
+
+
+def _sparse_spd_solve(S, rhs):
+    """``S⁻¹ rhs`` for a sparse symmetric ``S``, or ``LinAlgError`` when it is not positive definite: SuperLU with a
+    symmetric fill-reducing ordering and no pivoting factors ``S = L D Lᵀ`` (pivots ``D`` on ``U``'s diagonal)."""
+    try:
+        lu = scipy.sparse.linalg.splu(S.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                      options=dict(SymmetricMode=True))
+    except RuntimeError as exc:                                  # an exactly singular pivot
+        raise np.linalg.LinAlgError(str(exc)) from None
+    if not (np.all(lu.perm_r == lu.perm_c) and np.all(lu.U.diagonal() > 0)):
+        raise np.linalg.LinAlgError("the reduced camera matrix is not positive definite")
+    return lu.solve(rhs)
 
 
 @dataclass
@@ -287,7 +354,7 @@ def schur_step(camera_params: ArrayLike, points_3d: ArrayLike, camera_indices: A
     cp, X, ci, pi, x, Ks = check_problem(camera_params, points_3d, camera_indices, point_indices, points_2d, K)
     mu = as_positive(mu, "mu")
     V, M = cp.shape[0], X.shape[0]
-    st = _SchurStructure(ci, pi, V, M)
+    st = _SchurStructure(ci, pi, V, M, cp.shape[1], dense=True)
     u, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
     U, Vp, W, gc, gp = _normal_blocks(st, Jc, Jp, u - x)
     Dc = np.clip(np.diagonal(U, axis1=1, axis2=2), 1e-6, 1e32)
@@ -301,30 +368,21 @@ def schur_step(camera_params: ArrayLike, points_3d: ArrayLike, camera_indices: A
 
 
 def _reduced_camera_blocks(st, Y, W):
-    """``Σ_p W_p V_p⁻¹ W_pᵀ`` as a dense ``(V k, V k)`` matrix, from per-observation ``Y = W V⁻¹`` and ``W``.
+    """``Σ_p W_p V_p⁻¹ W_pᵀ`` by blocks, from per-observation ``Y = W V⁻¹`` and ``W``: ``(diag (V, k, k), off
+    (n_off, k, k))``, the diagonal blocks and the blocks ``(off_r, off_c)`` above the diagonal.
 
-    Block (c1, c2) sums ``Y_o1 W_o2ᵀ`` over the pairs of observations (o1 by c1, o2 by c2) of the same
-    point: the diagonal pairs (o1 = o2) once, the others (o1 < o2) once and mirrored by symmetry.
+    Block (c1, c2), c1 <= c2, sums ``Y_o1 W_o2ᵀ`` over the pairs of observations (o1 by c1, o2 by c2) of one point,
+    the pairs sorted by block once (:class:`_SchurStructure`), so that a batch of products is summed into its
+    blocks by one sparse indicator product; the diagonal blocks also get each observation's ``Y_o W_oᵀ``.
     """
-    n, k, _ = W.shape
-    V = st.V
-    Y2 = Y.reshape(n, 3 * k)
-    Wt2 = np.ascontiguousarray(np.swapaxes(W, 1, 2)).reshape(n, 3 * k)
-    G = np.zeros((V * V, k * k))
-    for o1, o2, A in st.chunks:
-        T = np.take(Y2, o1, axis=0).reshape(-1, k, 3) @ np.take(Wt2, o2, axis=0).reshape(-1, 3, k)
-        G += A @ T.reshape(-1, k * k)
-    Gd = st.A_diag @ (Y @ np.swapaxes(W, 1, 2)).reshape(n, k * k)
-
-    def dense(B):
-        return B.reshape(V, V, k, k).transpose(0, 2, 1, 3).reshape(V * k, V * k)
-
-    G = dense(G)
-    return G + G.T + dense(Gd)
-
-
-def _block_diag_dense(blocks):
-    V, k, _ = blocks.shape
-    out = np.zeros((V, k, V, k))
-    out[np.arange(V), :, np.arange(V), :] = blocks
-    return out.reshape(V * k, V * k)
+    k = W.shape[1]
+    B = np.empty((st.n_blocks, k, k))
+    Wt = np.ascontiguousarray(np.swapaxes(W, 1, 2))
+    for o1, o2, ind, blocks in st.chunks:
+        T = np.take(Y, o1, axis=0) @ np.take(Wt, o2, axis=0)
+        B[blocks] = (ind @ T.reshape(-1, k * k)).reshape(-1, k, k)
+    diag = st.cam.sum(Y @ Wt)
+    if st.same.size:                                              # pairs within one camera: both orders
+        same = B[st.same]
+        np.add.at(diag, st.same_cam, same + np.swapaxes(same, 1, 2))
+    return diag, B[st.off]

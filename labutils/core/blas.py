@@ -7,6 +7,8 @@ Both bundle-adjustment solvers run inside :func:`single_threaded_blas`.
 """
 import contextlib
 import ctypes
+import functools
+import sys
 
 _BLAS_NAMES = [("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"),
                ("scipy_openblas_get_num_threads", "scipy_openblas_set_num_threads"),
@@ -15,7 +17,15 @@ _BLAS_NAMES = [("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_thr
 
 
 def _openblas_controls():
-    """(get, set) thread-count functions of every OpenBLAS loaded in this process (Linux; else empty)."""
+    """(get, set) thread-count functions of every OpenBLAS loaded in this process (Linux; else empty).
+
+    Looked up again only when modules were imported since the last look (reading the process's memory map and
+    opening the libraries cost about a millisecond: too much for the many small solves of SfM)."""
+    return _openblas_controls_cached(len(sys.modules))
+
+
+@functools.lru_cache(maxsize=1)
+def _openblas_controls_cached(_n_modules):
     try:
         with open("/proc/self/maps") as f:
             paths = sorted({line.split()[-1] for line in f if "openblas" in line.lower() and ".so" in line})

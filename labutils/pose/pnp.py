@@ -23,6 +23,7 @@ from ..core.validation import (
     as_rotation,
     as_vector3,
 )
+from .p3p_scalar import _lambda_twist
 
 # --------------------------------------------------------------------------------------------- helpers
 
@@ -74,12 +75,17 @@ def reprojection_errors(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, 
     X = as_points(X, "X", dim=3)
     x = as_points(x, "x", like=(X, "X"))
     K, R, t = as_calibration(K), as_rotation(R), as_matrix(t, "t", (3,))
-    u = (X @ R.T + t) @ K.T
-    z = u[:, 2]
-    front = (X @ R[2] + t[2]) > 0
+    return _reprojection_errors(X, x, K, R, t)
+
+
+def _reprojection_errors(X, x, K, R, t):
+    """The kernel of :func:`reprojection_errors` (trusts its input: the RANSAC loop calls it per hypothesis)."""
+    P = X @ R.T + t
+    u = P @ K.T
     with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.linalg.norm(u[:, :2] / z[:, None] - x, axis=1)
-    e[~front | ~np.isfinite(e)] = np.inf
+        d = u[:, :2] / u[:, 2:] - x
+        e = np.sqrt(d[:, 0] ** 2 + d[:, 1] ** 2)
+    e[~(P[:, 2] > 0) | ~np.isfinite(e)] = np.inf
     return e
 
 
@@ -95,33 +101,6 @@ def _is_collinear(X, rel=1e-9):
 def _cross(a, b):
     """Cross product of two 3-vectors (np.cross is slow on single vectors)."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _cofactor(A):
-    """Cofactor matrix of a 3x3 matrix (columns are cross products of the other two columns)."""
-    return np.column_stack([_cross(A[:, 1], A[:, 2]), _cross(A[:, 2], A[:, 0]), _cross(A[:, 0], A[:, 1])])
-
-
-def _refine_lambdas(lam, a, b, iters=5):
-    """Gauss-Newton on the three law-of-cosines equations (LT Sec. 3.5).
-
-    ``lam`` (3,), ``a = (a12, a13, a23)``, ``b = (b12, b13, b23)``.
-    """
-    pairs = ((0, 1), (0, 2), (1, 2))
-    for _ in range(iters):
-        r = np.array([lam[i] ** 2 + lam[j] ** 2 - 2 * b[k] * lam[i] * lam[j] - a[k] for k, (i, j) in enumerate(pairs)])
-        if np.abs(r).sum() < 1e-15 * sum(a):
-            break
-        J = np.zeros((3, 3))
-        for k, (i, j) in enumerate(pairs):
-            J[k, i] = 2 * lam[i] - 2 * b[k] * lam[j]
-            J[k, j] = 2 * lam[j] - 2 * b[k] * lam[i]
-        try:
-            step = np.linalg.solve(J, r)
-        except np.linalg.LinAlgError:
-            break
-        lam = lam - step
-    return lam
 
 
 def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
@@ -176,85 +155,20 @@ def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     return _p3p_core(X, y, (a12, a13, a23), d12, d13, c)
 
 
+def _p3p_sample(X, y):
+    """P3P on one RANSAC sample (``X`` (3, 3), unit rays ``y`` (3, 3)): :func:`p3p_bearings` without its input checks;
+    a degenerate sample (collinear or coincident points) has no solution."""
+    d12, d13, d23 = X[0] - X[1], X[0] - X[2], X[1] - X[2]
+    a12, a13, a23 = float(d12 @ d12), float(d13 @ d13), float(d23 @ d23)
+    c = _cross(d12, d13)
+    if min(a12, a13, a23) == 0 or c @ c <= 1e-12 * a12 * a13:
+        return []
+    return _p3p_core(X, y, (a12, a13, a23), d12, d13, c)
+
+
 def _p3p_core(X, y, a, d12, d13, c):
-    a12, a13, a23 = a
-    b12, b13, b23 = y[0] @ y[1], y[0] @ y[2], y[1] @ y[2]
-    # the law of cosines as quadratic forms: Λᵀ Mij Λ = aij
-    M12 = np.array([[1, -b12, 0], [-b12, 1, 0], [0, 0, 0]])
-    M13 = np.array([[1, 0, -b13], [0, 0, 0], [-b13, 0, 1]])
-    M23 = np.array([[0, 0, 0], [0, 1, -b23], [0, -b23, 1]])
-    D1 = a23 * M12 - a12 * M23                   # Λᵀ D1 Λ = 0 and Λᵀ D2 Λ = 0 (the scale is gone)
-    D2 = a23 * M13 - a13 * M23
-    # det(D1 + γ D2) = c3 γ³ + c2 γ² + c1 γ + c0
-    coeffs = np.array([np.linalg.det(D2), np.sum(D1 * _cofactor(D2)), np.sum(D2 * _cofactor(D1)), np.linalg.det(D1)])
-    coeffs = coeffs / np.abs(coeffs).max()
-    roots = np.roots(coeffs)
-    best = None
-    for g in roots[np.abs(roots.imag) <= 1e-6 * (1 + np.abs(roots.real))].real:
-        for _ in range(2):                       # polish the root on the cubic
-            f, df = np.polyval(coeffs, g), np.polyval(np.polyder(coeffs), g)
-            if df != 0:
-                g = g - f / df
-        w, V = np.linalg.eigh(D1 + g * D2)
-        order = np.argsort(np.abs(w))            # w[order[0]] ≈ 0: D0 is singular
-        s1, s2 = w[order[2]], w[order[1]]
-        if s1 * s2 >= 0:                         # semidefinite: a pair of complex lines, skip
-            continue
-        quality = abs(s2 / s1)
-        if best is None or quality > best[0]:
-            best = (quality, g, s1, s2, V[:, order[2]], V[:, order[1]])
-    if best is None:
-        return []
-    _, g, s1, s2, e1, e2 = best
-    Q = D2 if abs(g) < 1 else D1                 # a conic of the pencil independent of D0
-    Msum, asum = M12 + M13 + M23, a12 + a13 + a23
-    Xm_inv = np.linalg.inv(np.column_stack([d12, d13, c]))
-    sols = []
-    s = np.sqrt(-s2 / s1)
-    for u in (e1 - s * e2, e1 + s * e2):         # σ1 (e1·Λ)² + σ2 (e2·Λ)² = 0  ⇒  (e1 ∓ s e2)·Λ = 0
-        k = int(np.argmax(np.abs(u)))
-        i, j = [m for m in range(3) if m != k]
-        p, q = np.zeros(3), np.zeros(3)          # Λ ∝ p + τ q with τ = λj / λi
-        p[i], p[k] = 1.0, -u[i] / u[k]
-        q[j], q[k] = 1.0, -u[j] / u[k]
-        A, B, C = q @ Q @ q, 2 * p @ Q @ q, p @ Q @ p
-        for tau in _quadratic_roots(A, B, C):
-            if tau <= 0:
-                continue
-            v = p + tau * q
-            if v[k] <= 0:
-                continue
-            lam = v * np.sqrt(asum / (v @ Msum @ v))
-            lam = _refine_lambdas(lam, (a12, a13, a23), (b12, b13, b23))
-            if not np.all(np.isfinite(lam)) or np.any(lam <= 0):
-                continue
-            v1, v2 = lam[0] * y[0] - lam[1] * y[1], lam[0] * y[0] - lam[2] * y[2]
-            R = np.column_stack([v1, v2, _cross(v1, v2)]) @ Xm_inv
-            U, _, Vt = np.linalg.svd(R)          # a no-op for exact depths; guards against round-off
-            R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
-            t = lam[0] * y[0] - R @ X[0]
-            if all(np.abs(R - R2).max() > 1e-9 or np.abs(t - t2).max() > 1e-9 * (1 + np.abs(t).max())
-                   for R2, t2 in sols):
-                sols.append((R, t))
-    return sols
-
-
-def _quadratic_roots(A, B, C):
-    """Real roots of A τ² + B τ + C (numerically stable; a double root counted once)."""
-    scale = max(abs(A), abs(B), abs(C))
-    if scale == 0:
-        return []
-    A, B, C = A / scale, B / scale, C / scale
-    if abs(A) < 1e-14:
-        return [] if abs(B) < 1e-14 else [-C / B]
-    disc = B * B - 4 * A * C
-    if disc < -1e-12:
-        return []
-    sq = np.sqrt(max(disc, 0.0))
-    r1 = (-B - sq) / (2 * A) if B >= 0 else (-B + sq) / (2 * A)
-    if disc <= 1e-12:
-        return [-B / (2 * A)]
-    return [r1, C / (A * r1)] if r1 != 0 else [r1, -B / A]
+    """Lambda Twist on a checked sample (:func:`labutils.pose.p3p_scalar._lambda_twist`, scalar arithmetic)."""
+    return _lambda_twist(X, y, a, d12, d13, c)
 
 
 def p3p(X: ArrayLike, x: ArrayLike, K: ArrayLike) -> list:
@@ -563,14 +477,11 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
         raise ValueError("all world points are collinear (or coincide): the pose is not determined")
     y = bearings(x, K)
 
-    def fit(idx):
-        try:
-            return p3p_bearings(X[idx], y[idx])
-        except ValueError:                      # a collinear sample: no candidate
-            return []
+    def fit(idx):                               # checked once above: the loop calls the kernels
+        return _p3p_sample(X[idx], y[idx])
 
     def errors(model):
-        return reprojection_errors(X, x, K, *model)
+        return _reprojection_errors(X, x, K, *model)
 
     (R, t), inliers, n_iter = ransac(len(X), 3, fit, errors, threshold_px, rng=rng, confidence=confidence,
                                      max_iter=max_iter)

@@ -1,4 +1,5 @@
-"""Benchmarks (printed, never asserted): ``python -m labutils.bench ba [--quick | --all]`` and
+"""Benchmarks (printed, never asserted): ``python -m labutils.bench ba [--quick | --all]``,
+``python -m labutils.bench pnp`` (ours against OpenCV's ``solvePnPRansac``, same problems, same run) and
 ``python -m labutils.bench notebooks [NOTEBOOK ...]``.
 
 ``notebooks`` runs each notebook top to bottom in a fresh kernel (as nbval does; nothing is saved) and prints its
@@ -17,13 +18,17 @@ times are what it prints.
 For each it prints JSON with the seconds (wall and CPU), iterations, and initial and final cost
 ``0.5·Σr²`` (and the robust objective) of LM-Schur and of scipy's ``least_squares`` with the sparsity
 mask (finite differences), with our analytic sparse Jacobian, and with tighter LSMR tolerances
-(``x_scale='jac'`` throughout). pyceres / pycolmap are not project dependencies; the bench only reports
-whether ``pyceres`` is importable.
+(``x_scale='jac'`` throughout).
+
+Ceres, the reference, runs beside ours when pycolmap is installed (an optional extra, ``pip install -e .[bench]``;
+not a workbook requirement): :func:`bench_ceres` times both on one thread, in turn, on ladybug, the dinosaur
+(plain least squares, intrinsics held) and synthetic sequences of 10 to 300 cameras (time per step against
+observations and the fitted slope), and prints both times, both costs and the ratios
+(:mod:`labutils.tools.reference`). Without pycolmap the section says ``"ceres": "not installed"``.
 
 The README's results table quotes what this prints on the 2-core workbook machine. Progress goes to stderr, one
 JSON document to stdout (``python -m labutils.bench ba | python -m json.tool`` works).
 """
-import importlib.util
 import json
 import os
 import sys
@@ -34,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bundle.adjust import bundle_adjust, solve_bal
+from ..bundle.reprojection import camera_params_from_Rt
 from ..core import cli as _cli
 from ..core.geometry import P_from_KRt
 from ..core.metrics import pose_errors
@@ -44,6 +50,7 @@ from ..data.bal import read_bal
 from ..data.loaders import load_scene
 from ..data.paths import find_data
 from ..twoview.triangulation import triangulate_multiview
+from .reference import ceres_available, compare_pnp_with_opencv, compare_with_ceres, scaling_run
 
 
 def dino_problem(*, rng, scene=None):
@@ -269,10 +276,38 @@ def bench_ladybug(max_iter_scipy=2000, variants=None, progress=_say):
         rows.append(_row(r, w, c, variant=name, rel_to_lm=r.cost_final / res.cost_final - 1,
                          speedup_of_lm=round(w / rows[0]["seconds"], 1)))
         progress(f"ladybug: {name} {w:.2f} s")
-    rows.append(dict(reference="pyceres", available=importlib.util.find_spec("pyceres") is not None,
-                     note="not a project dependency; not run"))
     return dict(problem="BAL ladybug problem-49-7776-pre: 49 cameras, 7776 points, 31843 observations; "
                         "all parameters (pose, f, k1, k2, points)", runs=rows)
+
+
+def bench_ceres(quick=False, progress=_say):
+    """Ours against Ceres (through pycolmap, when installed) on ladybug, the dinosaur and the scaling problems.
+
+    Plain least squares on both (Ceres applies a loss to a whole 2-vector residual, ours to each coordinate: only
+    the plain cost is the same). The dinosaur's cameras are those of :func:`dino_problem` with the intrinsics held
+    and the skew of its K set to 0 for both solvers (COLMAP's pinhole camera has no skew).
+    """
+    out = dict(available=ceres_available(), threads=1)
+    if not ceres_available():
+        progress("ceres: not installed (pip install -e .[bench]); timing ours only")
+        out["ceres"] = "not installed"
+    repeats = 1 if quick else 3
+    try:
+        p = read_bal(find_data("bal/problem-49-7776-pre.txt"))
+        progress("ceres: ladybug ...")
+        out["ladybug"] = compare_with_ceres((p.camera_params, p.points_3d, p.camera_indices, p.point_indices,
+                                             p.points_2d, None), repeats=repeats)
+    except FileNotFoundError as exc:
+        out["ladybug"] = dict(skipped=str(exc).splitlines()[0])
+    pb = dino_problem(rng=np.random.default_rng(0))
+    K = pb["scene"].K.copy()
+    K[0, 1] = 0.0
+    progress("ceres: dino ...")
+    out["dino"] = compare_with_ceres((camera_params_from_Rt(pb["R0"], pb["t0"]), pb["X0"], pb["camera_indices"],
+                                      pb["point_indices"], pb["points_2d"], K), repeats=repeats)
+    out["dino"]["note"] = "intrinsics held, skew of K set to 0 for both, plain least squares"
+    out["scaling"] = scaling_run((10, 30, 100) if quick else (10, 30, 100, 300), progress=progress)
+    return out
 
 
 NOTEBOOK_BUDGET_S = 90.0          # each notebook under nbval, on the 2-core CI machine (the developers' guide)
@@ -345,6 +380,9 @@ def _parser():
     size = ba.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_true", help="LM-Schur and scipy-analytic only, <= 200 scipy evaluations")
     size.add_argument("--all", action="store_true", help="also the tight-LSMR scipy variants on ladybug (~20 min each)")
+    sub.add_parser("pnp", help="pnp_ransac against OpenCV's solvePnPRansac (AP3P) on the same problems",
+                   description="Time pnp_ransac and OpenCV's solvePnPRansac (AP3P), one thread each, on 20 problems "
+                               "of 40-200 points with 30 % outliers; print both, their accuracy and the ratio.")
     nbs = sub.add_parser("notebooks", help="run each notebook in a fresh kernel and time it against the 90 s budget",
                          description="Run notebooks top to bottom (nothing is saved) and print their seconds, "
                                      "slowest cell and whether each is within the 90 s budget.")
@@ -361,6 +399,9 @@ def main(argv=None):
     args = _parser().parse_args(argv)
     machine = dict(cpus=os.cpu_count(), OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS"),
                    load_average=os.getloadavg())
+    if args.what == "pnp":
+        print(json.dumps(dict(machine=machine, pnp=compare_pnp_with_opencv()), indent=1))
+        return 0
     if args.what == "notebooks":
         paths = [Path(p) for p in args.paths] or sorted(NOTEBOOK_DIR.glob("[0-9][0-9]_*.ipynb"))
         for p in paths:
@@ -379,7 +420,7 @@ def main(argv=None):
         return 0
     variants = {"scipy-analytic": SCIPY_VARIANTS["scipy-analytic"]} if args.quick else SCIPY_VARIANTS
     n = 200 if args.quick else 2000
-    out = dict(machine=machine, dino=bench_dino(n, variants))
+    out = dict(machine=machine, ceres=bench_ceres(args.quick), dino=bench_dino(n, variants))
     try:
         out["ladybug"] = bench_ladybug(n, variants if (args.quick or args.all) else None)
     except FileNotFoundError as exc:
