@@ -26,6 +26,7 @@ The runner the checks share is :mod:`~labutils.exercises.runner` (:func:`run_che
 live in a module of its own (``labutils.exercises.ex01_fundamental`` ...), so that a wrong answer can be tested against
 its hint by the unit tests, without running the notebook.
 """
+from . import yours
 from .ex01_fundamental import (
     check_eight_point,
     check_normalisation_matrix,
@@ -96,7 +97,7 @@ from .ex13_calibration import (
 )
 from .runner import CaseResult, CheckReport, run_checks
 
-__all__ = ["CaseResult", "CheckReport", "run_checks", "check_eight_point", "check_normalisation_matrix",
+__all__ = ["CaseResult", "CheckReport", "run_checks", "yours", "check_eight_point", "check_normalisation_matrix",
            "check_sampson", "check_choose_pose", "check_four_poses", "check_triangulate_linear",
            "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "check_projection_jacobian",
            "check_schur_step", "check_sparsity_mask", "check_levenberg_marquardt", "check_incremental_loop",
