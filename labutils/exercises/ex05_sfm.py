@@ -302,24 +302,75 @@ __all__ = ["accept_points_reference", "check_accept_points", "check_choose_next_
 # ---------------------------------------------------------------------------------------------------------------
 
 
-def _register_reference(X, x, K, threshold_px, rng):
-    """P3P in RANSAC, refined on the inliers: R, t and the inlier mask (the library's pieces)."""
-    y = bearings(x, K)
+def _piece(name, given):
+    """The function given, else the student's from its notebook (``yours.load``), else the library's."""
+    if given is not None:
+        return given
+    from . import yours
+    return yours.load(name, quiet=True)
+
+
+def register_view(X, x, K, threshold_px, *, rng, ransac_loop=None):
+    """A new view's pose: P3P in adaptive RANSAC, refined on the inliers (notebook 03).
+
+    Parameters
+    ----------
+    X : (N, 3) ndarray
+        The model's points the view sees.
+    x : (N, 2) ndarray
+        Their pixels in the view.
+    K : (3, 3) ndarray
+    threshold_px : float
+    rng : numpy.random.Generator
+    ransac_loop : callable, optional
+        ``adaptive_ransac``-like loop; by default the student's ``adaptive_ransac`` of notebook 03 as saved in the
+        working folder (``yours.load``), the library's ``ransac`` where it is not written.
+
+    Returns
+    -------
+    R : (3, 3) ndarray
+    t : (3,) ndarray
+    inliers : (N,) bool ndarray
+        The correspondences reprojecting within ``threshold_px`` at the refined pose.
+    """
+    ransac_loop, y = _piece("adaptive_ransac", ransac_loop), bearings(x, K)
 
     def fit(idx):
         try:
             return p3p_bearings(X[idx], y[idx])
-        except ValueError:
+        except ValueError:                              # a collinear sample
             return []
 
-    (R, t), inl, _ = ransac(len(X), 3, fit, lambda pose: reprojection_errors(X, x, K, *pose), threshold_px, rng=rng,
-                            confidence=0.9999, max_iter=10000)
+    (R, t), inl, _ = ransac_loop(len(X), 3, fit, lambda pose: reprojection_errors(X, x, K, *pose), threshold_px,
+                                 rng=rng, confidence=0.9999, max_iter=10000)
     R, t = refine_pose(X[inl], x[inl], K, R, t)
     return R, t, reprojection_errors(X, x, K, R, t) < threshold_px
 
 
-def _triangulate_reference(tracks, K, R, t, v, new, registered):
-    """Each new track from view v and the registered view that sees it with the widest baseline (two-view DLT)."""
+def triangulate_new(tracks, K, R, t, v, new, registered, *, dlt=None):
+    """The tracks ``new`` triangulated from view ``v`` and, per track, the registered view that sees it with the
+    widest baseline (the camera centre farthest from ``v``'s), by two-view DLT.
+
+    Parameters
+    ----------
+    tracks : (V, T, 2) ndarray
+    K : (3, 3) ndarray
+    R, t : (V, 3, 3), (V, 3) ndarray
+        Poses, NaN for views not registered.
+    v : int
+        The new view.
+    new : (n,) int ndarray
+        The tracks to triangulate (each seen by ``v`` and another registered view).
+    registered : (V,) bool ndarray
+    dlt : callable, optional
+        ``triangulate_linear(P1, P2, x1, x2)``; by default the student's of notebook 02 (``yours.load``), the
+        library's ``triangulate`` where it is not written.
+
+    Returns
+    -------
+    X_new : (n, 3) ndarray
+    """
+    dlt = _piece("triangulate_linear", dlt)
     C = -np.einsum("vji,vj->vi", np.nan_to_num(R), np.nan_to_num(t))
     seen = np.isfinite(tracks[:, new, 0]) & registered[:, None]
     seen[v] = False
@@ -327,16 +378,38 @@ def _triangulate_reference(tracks, K, R, t, v, new, registered):
     X_new = np.full((len(new), 3), np.nan)
     for u in np.unique(partner):
         k = partner == u
-        X_new[k] = triangulate(K @ np.c_[R[v], t[v]], K @ np.c_[R[u], t[u]], tracks[v, new[k]], tracks[u, new[k]])
+        X_new[k] = dlt(K @ np.c_[R[v], t[v]], K @ np.c_[R[u], t[u]], tracks[v, new[k]], tracks[u, new[k]])
     return X_new
 
 
-def _adjust_reference(R, t, X, inliers, tracks, K, max_iter):
-    """Plain LM over the registered views, the points and the inlier observations."""
+def adjust(R, t, X, inliers, tracks, K, max_iter, *, lm=None):
+    """Bundle adjustment of the registered views and the model's points over the ``inliers`` observations.
+
+    Parameters
+    ----------
+    R, t : (V, 3, 3), (V, 3) ndarray
+        Poses, NaN for views not registered.
+    X : (T, 3) ndarray
+        Points, NaN for tracks not in the model.
+    inliers : (V, T) bool ndarray
+        The observations to use.
+    tracks : (V, T, 2) ndarray
+    K : (3, 3) ndarray
+    max_iter : int
+    lm : callable, optional
+        ``levenberg_marquardt``; by default the student's of notebook 04 (``yours.load``), the library's where it is
+        not written.
+
+    Returns
+    -------
+    R, t, X : ndarray
+        Adjusted copies.
+    """
+    lm = _piece("levenberg_marquardt", lm)
     views, points = np.flatnonzero(np.isfinite(R[:, 0, 0])), np.flatnonzero(np.isfinite(X[:, 0]))
     ci, pi = np.nonzero(inliers[np.ix_(views, points)])
-    cp, Xp, _ = levenberg_marquardt(camera_params_from_Rt(R[views], t[views]), X[points], ci, pi,
-                                    tracks[views[ci], points[pi]], K, max_iter=max_iter)
+    cp, Xp, _ = lm(camera_params_from_Rt(R[views], t[views]), X[points], ci, pi, tracks[views[ci], points[pi]], K,
+                   max_iter=max_iter)
     R, t, X = R.copy(), t.copy(), X.copy()
     (R[views], t[views]), X[points] = Rt_from_camera_params(cp), Xp
     return R, t, X
@@ -366,17 +439,17 @@ def incremental_loop_reference(tracks, K, init, *, rng, threshold_px=4.0, min_an
         v = next_view_reference(seen & inliers, X, registered, min_points)
         if v is not None:
             have = np.flatnonzero(seen[v] & np.isfinite(X[:, 0]))
-            R[v], t[v], inl = _register_reference(X[have], tracks[v, have], K, threshold_px, rng)
+            R[v], t[v], inl = register_view(X[have], tracks[v, have], K, threshold_px, rng=rng, ransac_loop=ransac)
             inliers[v, have[~inl]] = False
             registered[v] = True
             order.append(v)
             new = np.flatnonzero(np.isnan(X[:, 0]) & seen[v] & (seen[registered].sum(0) >= 2))
-            X_new = _triangulate_reference(tracks, K, R, t, v, new, registered)
+            X_new = triangulate_new(tracks, K, R, t, v, new, registered, dlt=triangulate)
             ok = accept_points_reference(X_new, K, R, t, tracks[:, new], seen[:, new] & registered[:, None],
                                          threshold_px, min_angle_deg)
             X[new[ok]] = X_new[ok]
         if v is None or registered.sum() >= growth * n_adjusted:
-            R, t, X = _adjust_reference(R, t, X, inliers & registered[:, None], tracks, K, ba_iter)
+            R, t, X = adjust(R, t, X, inliers & registered[:, None], tracks, K, ba_iter, lm=levenberg_marquardt)
             err = masked_reprojection_errors(K_all, R, t, np.nan_to_num(X), tracks, seen & registered[:, None])
             inliers &= ~(err > threshold_px)
             X[(inliers & registered[:, None]).sum(0) < 2] = np.nan
