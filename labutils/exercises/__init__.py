@@ -41,6 +41,7 @@ from .ex03_pnp import (
     check_adaptive_ransac,
     check_pose_from_depths,
     p3p_ransac_inliers,
+    pose_from_depths_reference,
 )
 from .ex04_bundle import (
     check_levenberg_marquardt,
@@ -102,7 +103,8 @@ from .runner import CaseResult, CheckReport, run_checks
 
 __all__ = ["CaseResult", "CheckReport", "run_checks", "yours", "check_eight_point", "check_normalisation_matrix",
            "check_sampson", "check_choose_pose", "check_four_poses", "check_triangulate_linear",
-           "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "check_projection_jacobian",
+           "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers",
+           "pose_from_depths_reference", "check_projection_jacobian",
            "check_schur_step", "check_sparsity_mask", "check_levenberg_marquardt", "check_incremental_loop",
            "incremental_loop_reference", "register_view", "triangulate_new", "adjust",
            "accept_points_reference", "check_accept_points",

@@ -17,6 +17,7 @@ from ..pose.pnp import bearings, p3p_bearings, refine_pose, reprojection_errors
 from ..sfm.reconstruction import masked_reprojection_errors
 from ..sfm.view_selection import choose_initial_pair
 from ..twoview.triangulation import ray_angles_deg, triangulate, triangulate_multiview
+from . import yours
 from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -304,10 +305,7 @@ __all__ = ["accept_points_reference", "check_accept_points", "check_choose_next_
 
 def _piece(name, given):
     """The function given, else the student's from its notebook (``yours.load``), else the library's."""
-    if given is not None:
-        return given
-    from . import yours
-    return yours.load(name, quiet=True)
+    return given if given is not None else yours.load(name, quiet=True)
 
 
 def register_view(X, x, K, threshold_px, *, rng, ransac_loop=None):

@@ -87,6 +87,8 @@ EXERCISES = dict([
         "labutils.twoview.triangulation:triangulate_tracks"),
     _ex("incremental_loop", "05_incremental_sfm", "labutils.exercises.ex05_sfm:incremental_loop_reference",
         "labutils.sfm.incremental:incremental_sfm", "labutils.sfm.global_sfm:global_sfm"),
+    _ex("pose_from_depths", "03_pnp", "labutils.exercises.ex03_pnp:pose_from_depths_reference",
+        "labutils.pose.pnp:p3p", "labutils.pose.pnp:p3p_bearings"),
 ])
 
 
