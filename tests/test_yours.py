@@ -83,3 +83,20 @@ def test_bad_names_are_refused():
         yours.load("eigth_point")
     with pytest.raises(ValueError, match="a str"):
         yours.load(3)
+
+
+def test_the_spy_names_what_the_hand_in_called_not_what_that_calls_in_turn():
+    ns = {"fundamental_8point": fundamental_8point}
+    exec("def eight_point(x1, x2):\n    return fundamental_8point(x1, x2)\n", ns)
+    with pytest.raises(AssertionError) as info:
+        yours.assert_own(ns["eight_point"], *_pair())
+    message = str(info.value)
+    assert "calls fundamental_8point:" in message and "_enforce_rank2" not in message, message
+
+
+def test_choose_pose_and_the_gold_standard_cost_have_fallbacks_with_the_students_signature():
+    import inspect
+    for name, params in [("choose_pose", ["poses", "y1", "y2"]),
+                         ("gold_standard_residuals", ["P2", "points", "x1", "x2"])]:
+        fallback = yours._resolve(yours.EXERCISES[name].fallback)
+        assert list(inspect.signature(fallback).parameters) == params, (name, fallback)

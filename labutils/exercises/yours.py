@@ -62,13 +62,27 @@ def _ex(name, notebook, fallback, *references):
 
 
 EXERCISES = dict([
-    _ex("normalisation_matrix", "01_fundamental_matrix", "labutils.twoview.epipolar:hartley_normalisation"),
+    # notebook 01
+    _ex("normalisation_matrix", "01_fundamental_matrix", "labutils.twoview.epipolar:hartley_normalisation",
+        "labutils.exercises.ex01_fundamental:_similarity"),
     _ex("eight_point", "01_fundamental_matrix", "labutils.twoview.epipolar:fundamental_8point",
-        "labutils.twoview.epipolar:fundamental_ransac", "cv2:findFundamentalMat"),
-    _ex("sampson", "01_fundamental_matrix", "labutils.twoview.epipolar:sampson_distance"),
+        "labutils.twoview.epipolar:fundamental_ransac", "labutils.twoview.epipolar:fundamental_7point",
+        "labutils.twoview.epipolar:_eight_point_normalised", "labutils.twoview.epipolar:_enforce_rank2",
+        "labutils.exercises.ex01_fundamental:_eight_point_T", "labutils.exercises.ex01_fundamental:_rank2",
+        "cv2:findFundamentalMat"),
+    _ex("sampson", "01_fundamental_matrix", "labutils.twoview.epipolar:sampson_distance",
+        "labutils.twoview.epipolar:_sampson_and_gradient", "labutils.exercises.ex01_fundamental:_sampson_parts",
+        "labutils.exercises.ex01_fundamental:_sampson_variants"),
+    _ex("gold_standard_residuals", "01_fundamental_matrix", "labutils.twoview.gold_standard:gold_standard_residuals",
+        "labutils.exercises.ex01_fundamental:_gs_variants"),
+    # notebook 02
     _ex("four_poses", "02_essential_and_pose", "labutils.twoview.essential:decompose_essential",
-        "cv2:decomposeEssentialMat"),
+        "labutils.exercises.ex02_essential:_svd_variants", "cv2:decomposeEssentialMat"),
+    _ex("choose_pose", "02_essential_and_pose", "labutils.twoview.essential:cheirality_choice",
+        "labutils.twoview.essential:_cheirality_counts", "labutils.twoview.essential:pose_from_essential",
+        "labutils.exercises.ex02_essential:_depths", "cv2:recoverPose"),
     _ex("triangulate_linear", "02_essential_and_pose", "labutils.twoview.triangulation:triangulate",
+        "labutils.twoview.triangulation:triangulate_multiview", "labutils.exercises.ex02_essential:_dlt",
         "cv2:triangulatePoints"),
     _ex("adaptive_ransac", "03_pnp", "labutils.core.ransac:ransac", "labutils.pose.pnp:pnp_ransac",
         "cv2:solvePnPRansac"),
@@ -293,8 +307,11 @@ def load(name, *, quiet=False):
 
 
 class _Spy:
+    """Records the forbidden functions called while the target runs: the outermost ones only (what the hand-in itself
+    called, not what they call in turn)."""
+
     def __init__(self, target, forbidden):
-        self.target, self.calls, self.depth = target, [], 0
+        self.target, self.calls, self.depth, self.inside = target, [], 0, []
         self.codes = {f.__code__: s for s, f in forbidden.items() if hasattr(f, "__code__")}
         self.builtins = {id(f): s for s, f in forbidden.items() if not hasattr(f, "__code__")}
 
@@ -303,10 +320,15 @@ class _Spy:
             if frame.f_code is self.target:
                 self.depth += 1
             elif self.depth and frame.f_code in self.codes:
-                self.calls.append(self.codes[frame.f_code])
-        elif event == "return" and frame.f_code is self.target:
-            self.depth -= 1
-        elif event == "c_call" and self.depth and id(arg) in self.builtins:
+                if not self.inside:
+                    self.calls.append(self.codes[frame.f_code])
+                self.inside.append(frame)
+        elif event == "return":
+            if frame.f_code is self.target:
+                self.depth -= 1
+            elif self.inside and frame is self.inside[-1]:
+                self.inside.pop()
+        elif event == "c_call" and self.depth and not self.inside and id(arg) in self.builtins:
             self.calls.append(self.builtins[id(arg)])
 
 
@@ -347,7 +369,7 @@ def assert_own(fn, *args, name=None, **kwargs):
     finally:
         sys.setprofile(previous)
     if spy.calls:
-        called = ", ".join(sorted({_label(c) for c in spy.calls}))
+        called = ", ".join(dict.fromkeys(_label(c) for c in spy.calls))
         raise AssertionError(f"{exercise.name} calls {called}: that is the library's answer, not yours — "
                              f"write the algorithm itself")
     return result

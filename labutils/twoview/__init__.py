@@ -19,13 +19,14 @@ from .epipolar import (
     sampson_distance,
 )
 from .essential import (
+    cheirality_choice,
     cheirality_counts,
     decompose_essential,
     essential_from_fundamental,
     fundamental_from_pose,
     pose_from_essential,
 )
-from .gold_standard import GoldStandardProblem, GoldStandardResult, fundamental_gold_standard
+from .gold_standard import GoldStandardProblem, GoldStandardResult, fundamental_gold_standard, gold_standard_residuals
 from .triangulation import (
     fundamental_residual,
     ray_angles_deg,
@@ -37,7 +38,7 @@ from .triangulation import (
 
 __all__ = ["ModelSelection", "design_matrix", "fundamental_7point", "fundamental_8point", "fundamental_ransac",
            "gric_model_selection", "hartley_normalisation", "homography_dlt", "sampson_distance",
-           "cheirality_counts", "decompose_essential", "essential_from_fundamental", "fundamental_from_pose",
-           "pose_from_essential", "GoldStandardProblem", "GoldStandardResult", "fundamental_gold_standard",
-           "fundamental_residual", "ray_angles_deg", "triangulate", "triangulate_multiview", "triangulate_optimal",
-           "triangulate_tracks"]
+           "cheirality_choice", "cheirality_counts", "decompose_essential", "essential_from_fundamental",
+           "fundamental_from_pose", "pose_from_essential", "GoldStandardProblem", "GoldStandardResult",
+           "fundamental_gold_standard", "gold_standard_residuals", "fundamental_residual", "ray_angles_deg",
+           "triangulate", "triangulate_multiview", "triangulate_optimal", "triangulate_tracks"]

@@ -4,8 +4,9 @@ Reads a Middlebury camera file (the images beside it), learns the background's c
 makes one silhouette per image, finds the object's box, carves the visual hull on a voxel grid, and writes its
 surface (marching cubes) as a binary PLY mesh; with ``--masks DIR`` also the silhouettes as PNGs
 (``<image>_mask.png``). Progress goes to stderr. Every failure is one line on stderr,
-``error: <file>[, line N]: what is wrong``, with exit status 2, and nothing is written. A model whose silhouettes
-match the masks poorly (median IoU < 0.5) is still written (exit 0), with one ``carve: warning: ...`` line on stderr.
+``error: <file>[, line N]: what is wrong``, with exit status 2, and nothing is written; an output that is the
+camera file, an image or another output is refused before any work. A model whose silhouettes match the masks
+poorly (median IoU < 0.5) is still written (exit 0), with one ``carve: warning: ...`` line on stderr.
 
 The estimators live in :mod:`labutils.model.carving`; this module is the thin command line around them.
 """
@@ -75,6 +76,7 @@ def run(args):
         raise _cli.CommandError(f"{par}: is a folder; give the camera file (e.g. {par / (par.name + '_par.txt')})")
     if not par.is_file():
         raise _cli.CommandError(f"{par}: no such file")
+    _cli.check_distinct([(out, "--out")], [(par, "the input PAR_FILE")])
     _cli.check_output_path(out, "--out")
     out_dir = out.parent if str(out.parent) else Path(".")
     masks_dir = Path(args.masks) if args.masks else None
@@ -95,6 +97,10 @@ def run(args):
             raise _cli.CommandError(f"--threshold must be a number >= 0 or 'auto'; got {args.threshold!r}")
 
     views = read_par(par)
+    masks_out = [(masks_dir / f"{Path(p).stem}_mask.png", "a --masks file") for p in views.image_paths] \
+        if masks_dir is not None else []
+    _cli.check_distinct([(out, "--out")] + masks_out,
+                        [(par, "the input PAR_FILE")] + [(p, "an input image") for p in views.image_paths])
     _log(args.quiet, f"carve: {views.n_views} cameras from {par}; reading the images")
     images = _read_images(views)
     for i, img in enumerate(images):
