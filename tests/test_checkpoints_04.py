@@ -1,20 +1,22 @@
-"""Notebook 04's checkpoints on the algorithm's own steps fail for plausibly wrong library functions (issue 9).
+"""Notebook 04's checkpoints on the algorithm's own steps fail for plausibly wrong exercise answers (issues 9, 19).
 
 The test runs the notebook's cells tagged ``checkpoint-04`` (setup, the residual, the small problem, the Jacobian
 against finite differences, the turntable and its mask, one Schur step against the damped normal equations) in a
-namespace where one library function is replaced by a wrong one, runs each top-level ``assert`` on its own, and
+namespace where the exercise functions the checkpoints use (``projection_jacobian``, ``sparsity_mask``,
+``schur_step``: the student's from exercise 1-3 on) are the library's references, or one is replaced by a wrong
+one, runs each top-level ``assert`` on its own, and
 checks that the checkpoint made for that step is among the failing ones — and that nothing fails with the library.
 """
 import ast
 from pathlib import Path
-from types import SimpleNamespace
 
 import matplotlib
 import numpy as np
 import scipy.sparse as sp
 from _checkpoints import tagged_cells
 
-from labutils.bundle.reprojection import jacobian_sparsity, reprojection_jacobian, reprojection_residuals
+from labutils.bundle.reprojection import jacobian_sparsity, reprojection_blocks
+from labutils.bundle.schur import schur_step_dense
 from labutils.core.geometry import left_jacobian_so3
 
 matplotlib.use("Agg")
@@ -36,6 +38,7 @@ def _failing_asserts(replace=None):
         assert any(check in src for src in cells), f"the notebook no longer has the checkpoint {check!r}"
     ns = {"__name__": "checkpoint_04"}
     exec(cells[0], ns)
+    ns.update(projection_jacobian=reprojection_blocks, sparsity_mask=jacobian_sparsity, schur_step=schur_step_dense)
     ns.update(replace or {})
     failing = []
     for src in cells[1:]:
@@ -57,14 +60,14 @@ def test_checkpoints_hold_for_the_library(capsys):
 
 def _jacobian_without_left_jacobian(camera_params, points_3d, camera_indices, point_indices, K):
     """Notebook 03's -[RX]× used at ω ≠ 0: the rotation columns of each camera times J_l(ω)⁻¹."""
-    J = reprojection_jacobian(camera_params, points_3d, camera_indices, point_indices, K).toarray()
-    for c, w in enumerate(np.asarray(camera_params)[:, :3]):
-        J[:, 6 * c:6 * c + 3] = J[:, 6 * c:6 * c + 3] @ np.linalg.inv(left_jacobian_so3(w))
-    return sp.csr_matrix(J)
+    Jc, Jp = reprojection_blocks(camera_params, points_3d, camera_indices, point_indices, K)
+    w = np.asarray(camera_params)[np.asarray(camera_indices), :3]
+    Jc[:, :, :3] = Jc[:, :, :3] @ np.linalg.inv(left_jacobian_so3(w))
+    return Jc, Jp
 
 
 def test_finite_differences_catch_a_jacobian_without_J_l(capsys):
-    assert JACOBIAN in _failing_asserts({"reprojection_jacobian": _jacobian_without_left_jacobian})
+    assert JACOBIAN in _failing_asserts({"projection_jacobian": _jacobian_without_left_jacobian})
 
 
 def test_the_mask_checkpoint_catches_a_mask_without_points(capsys):
@@ -72,24 +75,22 @@ def test_the_mask_checkpoint_catches_a_mask_without_points(capsys):
         A = jacobian_sparsity(n_cameras, n_points, camera_indices, point_indices).tolil()
         A[:, 6 * n_cameras:] = 0
         return A.tocsr()
-    assert MASK in _failing_asserts({"jacobian_sparsity": cameras_only})
+    assert MASK in _failing_asserts({"sparsity_mask": cameras_only})
 
 
 def test_the_mask_checkpoint_catches_a_full_mask(capsys):
     def everything(n_cameras, n_points, camera_indices, point_indices):
         return sp.csr_matrix(np.ones((2 * len(camera_indices), 6 * n_cameras + 3 * n_points), np.int8))
-    assert MASK in _failing_asserts({"jacobian_sparsity": everything})
+    assert MASK in _failing_asserts({"sparsity_mask": everything})
 
 
 def _dense_step(damp):
-    """A wrong library step: the damped normal equations with ``damp(A, mu, n_cam_cols)`` added."""
-    def step(camera_params, points_3d, camera_indices, point_indices, points_2d, K, *, mu):
-        J = reprojection_jacobian(camera_params, points_3d, camera_indices, point_indices, K).toarray()
-        r = reprojection_residuals(camera_params, points_3d, camera_indices, point_indices, points_2d, K)
+    """A wrong exercise step: the damped normal equations with ``damp(A, mu, n_cam_cols)`` added."""
+    def step(J, r, n_cam_cols, mu):
+        J = J.toarray() if sp.issparse(J) else np.asarray(J)
         A = J.T @ J
-        c = 6 * len(camera_params)
-        delta = np.linalg.solve(A + damp(A, mu, c), -J.T @ r)
-        return SimpleNamespace(delta_c=delta[:c].reshape(-1, 6), delta_p=delta[c:].reshape(-1, 3), S=np.zeros((c, c)))
+        delta = np.linalg.solve(A + damp(A, mu, n_cam_cols), -J.T @ r)
+        return delta[:n_cam_cols], delta[n_cam_cols:]
     return step
 
 
@@ -101,4 +102,4 @@ def _damp_cameras_only(A, mu, c):
 
 def test_the_schur_checkpoint_catches_wrong_damping(capsys):
     for damp in (_damp_cameras_only, lambda A, mu, c: mu * np.eye(len(A))):
-        assert SCHUR in _failing_asserts({"library_schur_step": _dense_step(damp)})
+        assert SCHUR in _failing_asserts({"schur_step": _dense_step(damp)})

@@ -1,11 +1,18 @@
 """Notebook 04's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
-from labutils.bundle.reprojection import jacobian_sparsity
+from labutils.bundle.reprojection import jacobian_sparsity, reprojection_blocks, reprojection_residuals
+from labutils.bundle.schur import levenberg_marquardt
 from labutils.core.geometry import left_jacobian_so3, rotation_from_angle_axis
-from labutils.exercises.ex04_bundle import check_projection_jacobian, check_schur_step, check_sparsity_mask
+from labutils.exercises.ex04_bundle import (
+    check_levenberg_marquardt,
+    check_projection_jacobian,
+    check_schur_step,
+    check_sparsity_mask,
+)
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 
@@ -184,3 +191,92 @@ def _schur_variant(damping="marquardt", rhs_sign=-1, S_sign=-1, back_sign=1, dia
 ])
 def test_schur_mistakes(kwargs, words):
     assert words in hints(check_schur_step(_schur_variant(**kwargs), verbose=False))
+
+
+def test_mask_without_the_camera_offset_is_named():
+    def f(V, M, ci, pi):
+        A = sparsity_mask_reference(V, M, ci, pi)
+        A[:, 6 * V:] = False
+        for i, p in enumerate(pi):
+            A[2 * i:2 * i + 2, 3 * p:3 * p + 3] = True                 # 3·p, without the 6·n_cameras before it
+        return A
+    assert "6·n_cameras + 3·p" in hints(check_sparsity_mask(f, verbose=False))
+
+
+# --- exercise 4: the Levenberg–Marquardt loop -----------------------------------------------------------------------
+
+def _lm(variant=None):
+    """The notebook's reference loop (with the library's blocks and dense step), or a variant with one mistake."""
+    def lm(camera_params, points_3d, camera_indices, point_indices, points_2d, K, *, mu=1e-4, max_iter=50, tol=1e-10):
+        cp, X = np.array(camera_params, float), np.array(points_3d, float)
+        V, M, n = len(cp), len(X), len(camera_indices)
+        rows = np.repeat(np.arange(2 * n), 9)
+        cols = np.concatenate([6 * camera_indices[:, None] + np.arange(6),
+                               6 * V + 3 * point_indices[:, None] + np.arange(3)], axis=1)
+        cols = np.repeat(cols, 2, axis=0).ravel()
+
+        def residual_and_cost(cp, X):
+            r = reprojection_residuals(cp, X, camera_indices, point_indices, points_2d, K)
+            return r, (1.0 if variant == "no half" else 0.5) * r @ r
+
+        r, cost = residual_and_cost(cp, X)
+        costs = [cost]
+        for _ in range(max_iter):
+            Jc, Jp = reprojection_blocks(cp, X, camera_indices, point_indices, K)
+            J = sp.csr_matrix((np.concatenate([Jc, Jp], axis=2).ravel(), (rows, cols)), shape=(2 * n, 6 * V + 3 * M))
+            dc, dp = schur_step_reference(J.toarray(), r, 6 * V, mu)
+            sign = -1 if variant == "minus" else 1
+            cp_new, X_new = cp + sign * dc.reshape(V, 6), X + sign * dp.reshape(M, 3)
+            r_new, cost_new = residual_and_cost(cp_new, X_new)
+            if cost_new < cost or variant == "always accept":
+                done = cost - cost_new <= tol * cost
+                cp, X, r, cost = cp_new, X_new, r_new, cost_new
+                mu = mu if variant == "mu never shrinks" else mu / 3
+            else:
+                mu *= 4
+                done = mu > 1e12
+            costs.append(cost)
+            if done and variant != "never stops":
+                break
+        return cp, X, np.array(costs)
+    return lm
+
+
+def test_lm_reference_and_library_pass():
+    assert_passes(check_levenberg_marquardt, _lm(), min_cases=3)
+    assert_passes(check_levenberg_marquardt, levenberg_marquardt)
+
+
+@pytest.mark.parametrize("variant, words", [
+    ("no half", "½ Σ r²"),
+    ("minus", "no step was ever accepted"),
+    ("always accept", "rejected"),
+    ("mu never shrinks", "μ ← μ/3"),
+    ("never stops", "stop when an accepted step"),
+])
+def test_lm_mistakes(variant, words):
+    assert words in hints(check_levenberg_marquardt(_lm(variant), verbose=False))
+
+
+def test_lm_stub_is_reported_as_not_written(capsys):
+    assert_stubs_not_written(capsys, check_levenberg_marquardt)
+
+
+def test_library_references_have_the_exercises_signatures():
+    """yours' fallbacks: the dense Schur step equals the sparse library step; the blocks are the sparse J's."""
+    from labutils.bundle import reprojection_jacobian, schur_step, schur_step_dense
+    rng = np.random.default_rng(0)
+    cp = np.c_[0.3 * rng.normal(size=(3, 3)), rng.normal(size=(3, 2)), 6 + rng.normal(size=3)]
+    X = rng.normal(size=(8, 3))
+    ci, pi = np.repeat(np.arange(3), 8), np.tile(np.arange(8), 3)
+    x = rng.normal(size=(24, 2)) * 50 + 300
+    K = np.array([[800.0, 2.0, 320.0], [0, 790.0, 240.0], [0, 0, 1]])
+    J = reprojection_jacobian(cp, X, ci, pi, K)
+    Jc, Jp = reprojection_blocks(cp, X, ci, pi, K)
+    assert np.allclose(J.toarray()[0::2, :6][ci == 0], Jc[ci == 0, 0]) and Jp.shape == (24, 2, 3)
+    r = reprojection_residuals(cp, X, ci, pi, x, K)
+    dc, dp = schur_step_dense(J, r, 18, 1e-3)
+    lib = schur_step(cp, X, ci, pi, x, K, mu=1e-3)
+    assert np.allclose(dc, lib.delta_c.ravel(), rtol=1e-6) and np.allclose(dp, lib.delta_p.ravel(), rtol=1e-6)
+    with pytest.raises(ValueError, match="n_cam_cols"):
+        schur_step_dense(J, r, 17, 1e-3)

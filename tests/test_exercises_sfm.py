@@ -3,14 +3,22 @@ import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
+from labutils.bundle.schur import levenberg_marquardt
 from labutils.core.geometry import camera_center
+from labutils.core.ransac import ransac
 from labutils.exercises.ex05_sfm import (
     accept_points_reference,
+    adjust,
     check_accept_points,
     check_choose_next_view,
+    check_incremental_loop,
+    incremental_loop_reference,
     next_view_reference,
+    register_view,
+    triangulate_new,
 )
 from labutils.sfm.incremental import next_view
+from labutils.twoview.triangulation import triangulate
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 
@@ -148,3 +156,59 @@ def test_accept_points_mistakes(variant, words):
 def test_accept_points_wrong_shape():
     report = check_accept_points(lambda X, *args: np.ones((len(X), 1), bool), verbose=False)
     assert "shape" in hints(report)
+
+
+# --- exercise 3: the incremental loop ------------------------------------------------------------------------------
+
+def _loop(variant=None):
+    """The notebook's loop (with the library's pieces), or a variant with one typical mistake."""
+    def incremental_loop(tracks, K, init, *, rng, threshold_px=4.0, min_angle_deg=1.5, min_points=15, growth=1.3,
+                         ba_iter=10):
+        V, T = tracks.shape[:2]
+        seen = np.isfinite(tracks[..., 0])
+        R, t, X = np.full((V, 3, 3), np.nan), np.full((V, 3), np.nan), np.full((T, 3), np.nan)
+        i, j = init["i"], init["j"]
+        R[i], t[i], R[j], t[j] = np.eye(3), np.zeros(3), init["R"], init["t"]
+        X[init["track"]] = init["X"]
+        registered, inliers = np.zeros(V, bool), seen.copy()
+        registered[[i, j]] = True
+        order, n_adjusted = ([j, i] if variant == "order" else [i, j]), 2
+        while True:
+            v = next_view_reference(seen & inliers, X, registered, min_points)
+            if variant == "pair only":
+                v = None
+            if v is not None:
+                have = np.flatnonzero(seen[v] & np.isfinite(X[:, 0]))
+                R[v], t[v], inl = register_view(X[have], tracks[v, have], K, threshold_px, rng=rng, ransac_loop=ransac)
+                inliers[v, have[~inl]] = False
+                registered[v] = True
+                order.append(v)
+                if variant != "no triangulation":
+                    new = np.flatnonzero(np.isnan(X[:, 0]) & seen[v] & (seen[registered].sum(0) >= 2))
+                    X_new = triangulate_new(tracks, K, R, t, v, new, registered, dlt=triangulate)
+                    ok = accept_points_reference(X_new, K, R, t, tracks[:, new], seen[:, new] & registered[:, None],
+                                                 threshold_px, min_angle_deg)
+                    X[new[ok]] = X_new[ok]
+            if v is None or registered.sum() >= growth * n_adjusted:
+                R, t, X = adjust(R, t, X, inliers & registered[:, None], tracks, K, ba_iter, lm=levenberg_marquardt)
+                n_adjusted = registered.sum()
+            if v is None:
+                return R, t, X, order
+    return incremental_loop
+
+
+def test_loop_reference_passes():
+    assert_passes(check_incremental_loop, incremental_loop_reference, min_cases=2)
+
+
+@pytest.mark.parametrize("variant, words", [
+    ("pair only", "only the initial pair"),
+    ("order", "start with the initial pair"),
+    ("no triangulation", "triangulate the new tracks"),
+])
+def test_loop_mistakes(variant, words):
+    assert words in hints(check_incremental_loop(_loop(variant), verbose=False))
+
+
+def test_loop_stub_is_reported_as_not_written(capsys):
+    assert_stubs_not_written(capsys, check_incremental_loop)

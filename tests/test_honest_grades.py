@@ -13,8 +13,8 @@ Why not run each hidden-test cell on a library-calling hand-in: the cell needs t
 notebook run per exercise — minutes. The cell's graded line *is* ``assert_own`` (1), and (3) is what it does with such
 a hand-in; ``tests/test_nbgrader_course.py`` runs the whole chain once, through ``nbgrader autograde``, on notebook 01.
 
-The exercises of notebooks 03–05 are converted on another branch: until then they are expected to fail (``PENDING``,
-a non-strict xfail); remove a number from ``PENDING`` once its notebook is converted.
+A notebook whose exercises are not converted yet goes into ``PENDING`` (a non-strict xfail); since notebooks 03–05
+were converted, none is.
 """
 import ast
 import copy
@@ -30,9 +30,8 @@ from labutils.exercises import yours
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted(p for p in (ROOT / "notebooks").glob("0[1-5]_*.ipynb"))
 REQUIRED = {"01", "02"}
-# Notebooks whose exercises are converted on another branch (issue 19): expected to fail (non-strict) until they are.
-# Remove a number once its notebook's hidden tests call yours.assert_own: the test then holds it.
-PENDING = {"03", "04", "05"}
+# Notebooks whose exercises are not converted yet: expected to fail (non-strict) until they are. None since 03–05 were.
+PENDING = set()
 
 
 def _cells(path):

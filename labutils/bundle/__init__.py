@@ -13,10 +13,11 @@ from .reprojection import (
     camera_params_from_Rt,
     jacobian_sparsity,
     project_observations,
+    reprojection_blocks,
     reprojection_jacobian,
     reprojection_residuals,
 )
-from .schur import SchurStep, schur_step
+from .schur import SchurStep, levenberg_marquardt, schur_step, schur_step_dense
 from .uncertainty import (
     PosePrediction,
     aligned_pose_covariance,
@@ -29,6 +30,7 @@ from .uncertainty import (
 
 __all__ = ["BundleResult", "bundle_adjust", "bundle_adjust_params", "solve_bal", "gauge_basis",
            "Rt_from_camera_params", "camera_params_from_Rt", "jacobian_sparsity", "project_observations",
-           "reprojection_jacobian", "reprojection_residuals", "SchurStep", "schur_step", "PosePrediction",
+           "reprojection_blocks", "reprojection_jacobian", "reprojection_residuals", "SchurStep", "schur_step",
+           "schur_step_dense", "levenberg_marquardt", "PosePrediction",
            "aligned_pose_covariance", "camera_information", "effective_terms", "gauge_pose_covariance",
            "pose_error_map", "predict_pose_errors"]

@@ -267,6 +267,37 @@ def reprojection_jacobian(camera_params: ArrayLike, points_3d: ArrayLike, camera
     return assemble_jacobian(Jc, Jp, jacobian_structure(ci, pi, V, X.shape[0], k), k * V + 3 * X.shape[0])
 
 
+def reprojection_blocks(camera_params: ArrayLike, points_3d: ArrayLike, camera_indices: ArrayLike,
+                        point_indices: ArrayLike, K: ArrayLike) -> tuple:
+    """The per-observation blocks of :func:`reprojection_jacobian`: ``∂u/∂(ω, t)`` and ``∂u/∂X``.
+
+    The reference of notebook 04's exercise ``projection_jacobian`` (same arguments, same return).
+
+    Parameters
+    ----------
+    camera_params, points_3d, camera_indices, point_indices, K
+        As in :func:`reprojection_residuals` (no observed pixels needed).
+
+    Returns
+    -------
+    Jc : (n_obs, 2, k) ndarray
+        The camera block of each observation (columns ``ω1 ω2 ω3 t1 t2 t3 [f k1 k2]``).
+    Jp : (n_obs, 2, 3) ndarray
+        The point block of each observation.
+
+    Examples
+    --------
+    >>> cp = np.zeros((1, 6)); cp[0, 5] = 5
+    >>> Jc, Jp = reprojection_blocks(cp, np.zeros((1, 3)), [0], [0], np.eye(3))
+    >>> Jc.shape, Jp.shape, Jp[0].tolist()
+    ((1, 2, 6), (1, 2, 3), [[0.2, 0.0, 0.0], [0.0, 0.2, 0.0]])
+    """
+    cp, X, ci, pi, _, Ks = check_problem(camera_params, points_3d, camera_indices, point_indices, None, K,
+                                          need_2d=False)
+    _, Jc, Jp = project_observations(cp, X, ci, pi, Ks, jac=True)
+    return Jc, Jp
+
+
 def jacobian_sparsity(n_cameras: int, n_points: int, camera_indices: ArrayLike, point_indices: ArrayLike,
                       camera_block: int = 6):
     """Sparsity mask of the bundle-adjustment Jacobian (the ``jac_sparsity`` of ``least_squares``).

@@ -10,7 +10,8 @@ system) is computed once per problem and reused by every iteration. Robust losse
 squares, then the loss's second-order curvature near the optimum (:mod:`labutils.core.robust`). Called through
 :func:`labutils.bundle.bundle_adjust` (``solver='lm-schur'``), which checks the input and fixes the gauge.
 :func:`schur_step` computes one damped step of the same solver on its own (notebook 04 derives it in cells and
-compares).
+compares); :func:`schur_step_dense` and :func:`levenberg_marquardt` are the references of notebook 04's exercises
+(the step on a dense ``J``, and the plain LM loop around the step).
 """
 import sys
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ from numpy.typing import ArrayLike
 from ..core.lm import minimise
 from ..core.robust import CURVATURE_FLOOR, SECOND_ORDER_AFTER, rho
 from ..core.validation import as_positive
-from .reprojection import check_problem, project_observations
+from .reprojection import check_problem, project_observations, reprojection_residuals
 
 
 def _inv_sym3(A):
@@ -386,3 +387,120 @@ def _reduced_camera_blocks(st, Y, W):
         same = B[st.same]
         np.add.at(diag, st.same_cam, same + np.swapaxes(same, 1, 2))
     return diag, B[st.off]
+
+
+def _block_diag_dense(blocks):
+    V, k, _ = blocks.shape
+    out = np.zeros((V, k, V, k))
+    out[np.arange(V), :, np.arange(V), :] = blocks
+    return out.reshape(V * k, V * k)
+
+
+def schur_step_dense(J: ArrayLike, r: ArrayLike, n_cam_cols: int, mu: float) -> tuple:
+    """One damped Gauss–Newton step ``(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr`` by the Schur complement, on a dense ``J``.
+
+    The reference of notebook 04's exercise ``schur_step`` (same arguments, same return): the ``3×3`` point
+    blocks of ``V`` are inverted one by one, the reduced camera system ``S δc = -(gc - W V⁻¹ gp)`` is solved and
+    ``δp = -V⁻¹ (gp + Wᵀ δc)`` back-substituted (H&Z Alg. A6.4).
+
+    Parameters
+    ----------
+    J : (N, n_cam_cols + 3 M) array_like
+        Jacobian, camera columns first, then 3 columns per point.
+    r : (N,) array_like
+        Residuals.
+    n_cam_cols : int
+        Number of camera columns (6 V).
+    mu : float
+        Damping, > 0.
+
+    Returns
+    -------
+    delta_c : (n_cam_cols,) ndarray
+    delta_p : (3 M,) ndarray
+
+    Examples
+    --------
+    Each row touches one point (rows 0–9 point 0, rows 10–19 point 1), so ``V`` is block diagonal:
+
+    >>> J = np.random.default_rng(0).normal(size=(20, 12)); J[:10, 9:] = J[10:, 6:9] = 0; r = np.ones(20)
+    >>> dc, dp = schur_step_dense(J, r, 6, 1e-3)
+    >>> A = J.T @ J; delta = np.linalg.solve(A + 1e-3 * np.diag(np.diag(A)), -J.T @ r)
+    >>> bool(np.allclose(np.r_[dc, dp], delta))
+    True
+    """
+    J = np.asarray(J.toarray() if sp.issparse(J) else J, dtype=float)
+    r = np.asarray(r, dtype=float)
+    if J.ndim != 2 or r.shape != (J.shape[0],):
+        raise ValueError(f"J must be (N, n) and r (N,); got J {J.shape} and r {r.shape}")
+    c = int(n_cam_cols)
+    if not 0 <= c <= J.shape[1] or (J.shape[1] - c) % 3:
+        raise ValueError(f"n_cam_cols must leave a multiple of 3 point columns of J's {J.shape[1]}; got {n_cam_cols}")
+    mu = as_positive(mu, "mu")
+    A, g = J.T @ J, J.T @ r
+    A = A + mu * np.diag(np.diag(A))
+    U, W, Vb = A[:c, :c], A[:c, c:], A[c:, c:]
+    M = Vb.shape[0] // 3
+    blocks = Vb.reshape(M, 3, M, 3)[np.arange(M), :, np.arange(M), :]          # (M, 3, 3) diagonal blocks
+    V_inv = scipy.linalg.block_diag(*np.linalg.inv(blocks)) if M else np.zeros((0, 0))
+    S = U - W @ V_inv @ W.T
+    delta_c = np.linalg.solve(S, -(g[:c] - W @ V_inv @ g[c:])) if c else np.zeros(0)
+    return delta_c, -V_inv @ (g[c:] + W.T @ delta_c)
+
+
+def levenberg_marquardt(camera_params: ArrayLike, points_3d: ArrayLike, camera_indices: ArrayLike,
+                        point_indices: ArrayLike, points_2d: ArrayLike, K: ArrayLike, *, mu: float = 1e-4,
+                        max_iter: int = 50, tol: float = 1e-10) -> tuple:
+    """Plain Levenberg–Marquardt for bundle adjustment: one Schur step per iteration, accepted if it lowers the cost.
+
+    The reference of notebook 04's exercise ``levenberg_marquardt`` (same arguments, same return). An accepted step
+    trusts the linear model more (``μ ← μ/3``), a rejected one damps more (``μ ← 4μ``, the parameters unchanged).
+    The loop stops after ``max_iter`` iterations, when an accepted step lowers the cost by less than
+    ``tol · cost``, or when ``μ`` exceeds ``1e12`` (no step lowers the cost). No gauge is fixed (the damping keeps
+    every step finite) and no loss other than least squares: :func:`labutils.bundle.bundle_adjust` does both.
+
+    Parameters
+    ----------
+    camera_params, points_3d, camera_indices, point_indices, points_2d, K
+        As in :func:`labutils.bundle.reprojection_residuals`.
+    mu : float
+        Initial damping, > 0.
+    max_iter : int
+        Most iterations (one step each, accepted or not).
+    tol : float
+        Relative decrease of the cost below which an accepted step ends the loop.
+
+    Returns
+    -------
+    camera_params : (V, 6) ndarray
+    points_3d : (M, 3) ndarray
+    costs : (n_iter + 1,) ndarray
+        ``½ Σ r²`` at the start and after each iteration (unchanged after a rejected step).
+
+    Examples
+    --------
+    >>> cp = np.array([[0., 0, 0, 0, 0, 5], [0, 0.1, 0, -1, 0, 5]]); X = np.random.default_rng(0).normal(size=(6, 3))
+    >>> ci, pi = np.repeat([0, 1], 6), np.tile(np.arange(6), 2); K = np.diag([500., 500, 1])
+    >>> x = reprojection_residuals(cp, X, ci, pi, np.zeros((12, 2)), K).reshape(-1, 2)
+    >>> cp1, X1, costs = levenberg_marquardt(cp + 0.01, X, ci, pi, x, K)
+    >>> bool(costs[0] > 1 and costs[-1] < 1e-12 and np.all(np.diff(costs) <= 0))
+    True
+    """
+    cp, X, ci, pi, x, Ks = check_problem(camera_params, points_3d, camera_indices, point_indices, points_2d, K)
+    mu = as_positive(mu, "mu")
+    cost = 0.5 * float(np.sum(reprojection_residuals(cp, X, ci, pi, x, K) ** 2))
+    costs = [cost]
+    for _ in range(int(max_iter)):
+        step = schur_step(cp, X, ci, pi, x, K, mu=mu)
+        cp_new, X_new = cp + step.delta_c, X + step.delta_p
+        new = 0.5 * float(np.sum(reprojection_residuals(cp_new, X_new, ci, pi, x, K) ** 2))
+        if new < cost:
+            done = cost - new <= tol * cost
+            cp, X, cost, mu = cp_new, X_new, new, mu / 3
+        else:
+            mu *= 4
+            done = mu > 1e12
+        costs.append(cost)
+        if done:
+            break
+    return cp, X, np.array(costs)

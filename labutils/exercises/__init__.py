@@ -48,17 +48,24 @@ from .ex03_pnp import (
     check_adaptive_ransac,
     check_pose_from_depths,
     p3p_ransac_inliers,
+    pose_from_depths_reference,
 )
 from .ex04_bundle import (
+    check_levenberg_marquardt,
     check_projection_jacobian,
     check_schur_step,
     check_sparsity_mask,
 )
 from .ex05_sfm import (
     accept_points_reference,
+    adjust,
     check_accept_points,
     check_choose_next_view,
+    check_incremental_loop,
+    incremental_loop_reference,
     next_view_reference,
+    register_view,
+    triangulate_new,
 )
 from .ex06_noise import (
     check_cramer_rao_pose,
@@ -104,8 +111,10 @@ from .runner import CaseResult, CheckReport, run_checks
 __all__ = ["CaseResult", "CheckReport", "run_checks", "yours", "check_eight_point", "check_gold_standard_residuals",
            "check_normalisation_matrix", "check_sampson", "check_choose_pose", "check_four_poses",
            "check_triangulate_linear",
-           "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "check_projection_jacobian",
-           "check_schur_step", "check_sparsity_mask", "accept_points_reference", "check_accept_points",
+           "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "pose_from_depths_reference",
+           "check_projection_jacobian", "check_schur_step", "check_sparsity_mask", "check_levenberg_marquardt",
+           "check_incremental_loop", "incremental_loop_reference", "register_view", "triangulate_new", "adjust",
+           "accept_points_reference", "check_accept_points",
            "check_choose_next_view", "next_view_reference", "check_cramer_rao_pose", "check_nees",
            "cramer_rao_reference", "nees_reference", "check_build_tracks", "check_mutual_check", "check_ratio_test",
            "check_pose_covariance", "check_pyramid_score", "check_centres_from_directions", "check_chordal_rotations",

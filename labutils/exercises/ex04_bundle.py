@@ -1,5 +1,5 @@
-"""Self-checks of notebook 04 (bundle adjustment): the projection Jacobian, the Jacobian's sparsity mask and one
-damped Schur-complement step.
+"""Self-checks of notebook 04 (bundle adjustment): the projection Jacobian, the Jacobian's sparsity mask, one
+damped Schur-complement step and the Levenberg–Marquardt loop around it.
 
 Each check runs a student's function on a few cases and prints pass or a hint naming the likely mistake, found by
 comparing the answer with the typical wrong variants (J_l(ω) left out, [X]× instead of [RX]×, K's skew dropped,
@@ -15,10 +15,11 @@ from ..bundle.reprojection import (
     reprojection_jacobian,
     reprojection_residuals,
 )
+from ..bundle.schur import levenberg_marquardt as _library_lm
 from ..bundle.schur import schur_step as _library_schur_step
 from ..core.geometry import left_jacobian_so3, rotation_from_angle_axis, skew
 from ..core.scene import observations
-from ..core.synthetic import DEFAULT_K, make_scene
+from ..core.synthetic import DEFAULT_K, make_scene, perturb_cameras
 from .runner import run_checks
 
 K_SKEW = np.array([[1500.0, -60.0, 350.0], [0.0, 1480.0, 300.0], [0.0, 0.0, 1.0]])
@@ -220,6 +221,10 @@ def _diagnose_mask(A, V, M, ci, pi):
         return "cameras come first: columns 6·c … 6·c + 5 for camera c, then 3 per point from column 6·n_cameras"
     if np.array_equal(A[0::2], ref[0::2]) != np.array_equal(A[1::2], ref[1::2]):
         return "both rows of an observation (2i for x, 2i + 1 for y) depend on the same camera and point"
+    missing, extra = ~A & ref, A & ~ref
+    if missing[:, :6 * V].sum() == 0 and missing.any() and extra.any() and not extra[:, 3 * M:].any():
+        return ("the point columns are missing their offset: point p's columns come after all 6·n_cameras camera "
+                "columns, 6·n_cameras + 3·p + (0, 1, 2), not 3·p + (0, 1, 2)")
     if (A & ~ref).any() and not (~A & ref).any():
         return (f"{int((A & ~ref).sum())} entries too many: a row has exactly 9 non-zeros (its camera's 6, its "
                 "point's 3); a mask that is too full costs scipy extra finite differences")
@@ -372,4 +377,95 @@ def check_schur_step(schur_step, verbose=True):
         ("a small scene, μ = 1e-3: the damped normal equations (and the library's step)", case(0, 1e-3, library=True)),
         ("strong damping, μ = 10", case(1, 10.0)),
         ("four cameras, points seen by two to four of them, μ = 1e-2", two_views),
+    ], verbose=verbose)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# exercise 4: the Levenberg–Marquardt loop
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _lm_problem(seed, noise_px=1.0, rot_deg=1.0):
+    """A small turntable from perturbed cameras: (camera_params, points, ci, pi, x, K)."""
+    rng = np.random.default_rng(seed)
+    s = make_scene(40, 5, layout="turntable", noise_px=noise_px, rng=rng)
+    ci, pi, x = observations(s.x_meas)
+    R0, t0 = perturb_cameras(s.R, s.t, rng=rng, rot_deg=rot_deg, rel_shift=0.02)
+    X0 = s.X + 0.01 * rng.normal(size=s.X.shape)
+    return camera_params_from_Rt(R0, t0), X0, ci, pi, x, s.K
+
+
+def _unpack_lm(out, V, M):
+    if not isinstance(out, tuple | list) or len(out) != 3:
+        raise ValueError("levenberg_marquardt must return a triple (camera_params, points_3d, costs)")
+    cp, X, costs = (np.asarray(a, float) for a in out)
+    if cp.shape != (V, 6) or X.shape != (M, 3):
+        raise ValueError(f"camera_params must come back as ({V}, 6) and points_3d as ({M}, 3); got {cp.shape} and "
+                         f"{X.shape} (reshape delta_c to (V, 6) and delta_p to (M, 3))")
+    if costs.ndim != 1 or costs.size < 1:
+        raise ValueError("costs must be a 1-d array: the cost at the start, then one per iteration")
+    return cp, X, costs
+
+
+def _diagnose_lm(out, prob, mu, max_iter, tol):
+    cp0, X0, ci, pi, x, K = prob
+    cp, X, costs = _unpack_lm(out, len(cp0), len(X0))
+    r0 = reprojection_residuals(cp0, X0, ci, pi, x, K)
+    c0 = 0.5 * r0 @ r0
+    if np.isclose(costs[0], 2 * c0, rtol=1e-9):
+        return "costs[0] is Σ r²: the cost is ½ Σ r² (the factor ½ makes Jᵀr its gradient)"
+    if not np.isclose(costs[0], c0, rtol=1e-9):
+        return f"costs[0] = {costs[0]:.6g} is not the cost at the start, ½ Σ r² = {c0:.6g}"
+    if costs.size > max_iter + 1:
+        return f"{costs.size - 1} iterations where max_iter = {max_iter}: stop after max_iter"
+    rise = np.flatnonzero(np.diff(costs) > 1e-12 * costs[0])
+    if rise.size:
+        return (f"the cost went up at iteration {rise[0] + 1}: a step that does not lower the cost is rejected — keep "
+                "the old parameters (and the old cost) and damp more, μ ← 4μ")
+    r = reprojection_residuals(cp, X, ci, pi, x, K)
+    if not np.isclose(0.5 * r @ r, costs[-1], rtol=1e-9):
+        return ("the parameters returned are not those of the last cost: return the parameters of the last accepted "
+                "step")
+    _, _, ref = _library_lm(cp0, X0, ci, pi, x, K, mu=mu, max_iter=max_iter, tol=tol)
+    if np.allclose(costs, costs[0]):
+        return ("no step was ever accepted: the step δ solves (JᵀJ + μD)δ = -Jᵀr, so add it — cp + δc.reshape(V, 6), "
+                "X + δp.reshape(M, 3) — and check that J's columns are in the order schur_step expects (cameras first)")
+    if costs[-1] > ref[-1] * (1 + 1e-6) + 1e-9:
+        if costs.size == max_iter + 1:
+            return (f"after {max_iter} iterations the cost is {costs[-1]:.6g} where the reference reaches "
+                    f"{ref[-1]:.6g}: after an accepted step trust the linear model more, μ ← μ/3 (with μ only "
+                    "growing, LM crawls like gradient descent)")
+        return (f"stopped at cost {costs[-1]:.6g} where the reference reaches {ref[-1]:.6g}: stop only when an "
+                "accepted step lowers the cost by less than tol · cost (a rejected step is no reason to stop)")
+    if costs.size == max_iter + 1 and ref.size < max_iter / 2:
+        return (f"the loop ran all {max_iter} iterations where {ref.size - 1} suffice: stop when an accepted step "
+                "lowers the cost by less than tol · cost, or when μ has grown past ~1e12 (no step lowers the cost)")
+    return None
+
+
+def check_levenberg_marquardt(levenberg_marquardt, verbose=True):
+    """Self-check of ``levenberg_marquardt(camera_params, points_3d, camera_indices, point_indices, points_2d, K, *,
+    mu, max_iter, tol) -> (camera_params, points_3d, costs)``: the LM loop of bundle adjustment around a Schur step.
+
+    Cases: a small turntable from perturbed cameras (the reference's cost after 30 iterations, the cost never rising),
+    a start with heavy damping (μ must shrink after accepted steps), and the stopping rule (``tol = 1e-4``, which the
+    reference meets after about 15 of the 60 iterations allowed). The student's loop calls their own
+    ``projection_jacobian`` and ``schur_step``.
+
+    Examples
+    --------
+    >>> check_levenberg_marquardt(_library_lm, verbose=False).passed
+    True
+    """
+    def case(seed, mu, max_iter, tol=1e-10, **kw):
+        def run(f):
+            prob = _lm_problem(seed, **kw)
+            out = f(*(a.copy() for a in prob), mu=mu, max_iter=max_iter, tol=tol)
+            return _diagnose_lm(out, prob, mu, max_iter, tol)
+        return run
+
+    return run_checks("levenberg_marquardt", levenberg_marquardt, [
+        ("a small turntable from perturbed cameras: the optimum, the cost never rising", case(0, 1e-4, 30)),
+        ("heavy damping at the start (μ = 100): μ must shrink after each accepted step", case(1, 100.0, 30)),
+        ("tol = 1e-4: the loop stops by itself, long before max_iter = 60", case(2, 1e-4, 60, tol=1e-4, rot_deg=0.05)),
     ], verbose=verbose)

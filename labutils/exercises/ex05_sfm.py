@@ -8,10 +8,16 @@ far off while the mean is small, a narrow angle ...), so the track a wrong answe
 """
 import numpy as np
 
+from ..bundle.reprojection import Rt_from_camera_params, camera_params_from_Rt
+from ..bundle.schur import levenberg_marquardt
 from ..core.geometry import camera_center
+from ..core.ransac import ransac
 from ..core.synthetic import look_at, make_scene
+from ..pose.pnp import bearings, p3p_bearings, refine_pose, reprojection_errors
 from ..sfm.reconstruction import masked_reprojection_errors
-from ..twoview.triangulation import ray_angles_deg, triangulate_multiview
+from ..sfm.view_selection import choose_initial_pair
+from ..twoview.triangulation import ray_angles_deg, triangulate, triangulate_multiview
+from . import yours
 from .runner import run_checks
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -290,3 +296,237 @@ def check_accept_points(accept_points, verbose=True):
 
 
 __all__ = ["accept_points_reference", "check_accept_points", "check_choose_next_view", "next_view_reference"]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# exercise 3: the incremental loop
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _piece(name, given):
+    """The function given, else the student's from its notebook (``yours.load``), else the library's."""
+    return given if given is not None else yours.load(name, quiet=True)
+
+
+def register_view(X, x, K, threshold_px, *, rng, ransac_loop=None):
+    """A new view's pose: P3P in adaptive RANSAC, refined on the inliers (notebook 03).
+
+    Parameters
+    ----------
+    X : (N, 3) ndarray
+        The model's points the view sees.
+    x : (N, 2) ndarray
+        Their pixels in the view.
+    K : (3, 3) ndarray
+    threshold_px : float
+    rng : numpy.random.Generator
+    ransac_loop : callable, optional
+        ``adaptive_ransac``-like loop; by default the student's ``adaptive_ransac`` of notebook 03 as saved in the
+        working folder (``yours.load``), the library's ``ransac`` where it is not written.
+
+    Returns
+    -------
+    R : (3, 3) ndarray
+    t : (3,) ndarray
+    inliers : (N,) bool ndarray
+        The correspondences reprojecting within ``threshold_px`` at the refined pose.
+    """
+    ransac_loop, y = _piece("adaptive_ransac", ransac_loop), bearings(x, K)
+
+    def fit(idx):
+        try:
+            return p3p_bearings(X[idx], y[idx])
+        except ValueError:                              # a collinear sample
+            return []
+
+    (R, t), inl, _ = ransac_loop(len(X), 3, fit, lambda pose: reprojection_errors(X, x, K, *pose), threshold_px,
+                                 rng=rng, confidence=0.9999, max_iter=10000)
+    R, t = refine_pose(X[inl], x[inl], K, R, t)
+    return R, t, reprojection_errors(X, x, K, R, t) < threshold_px
+
+
+def triangulate_new(tracks, K, R, t, v, new, registered, *, dlt=None):
+    """The tracks ``new`` triangulated from view ``v`` and, per track, the registered view that sees it with the
+    widest baseline (the camera centre farthest from ``v``'s), by two-view DLT.
+
+    Parameters
+    ----------
+    tracks : (V, T, 2) ndarray
+    K : (3, 3) ndarray
+    R, t : (V, 3, 3), (V, 3) ndarray
+        Poses, NaN for views not registered.
+    v : int
+        The new view.
+    new : (n,) int ndarray
+        The tracks to triangulate (each seen by ``v`` and another registered view).
+    registered : (V,) bool ndarray
+    dlt : callable, optional
+        ``triangulate_linear(P1, P2, x1, x2)``; by default the student's of notebook 02 (``yours.load``), the
+        library's ``triangulate`` where it is not written.
+
+    Returns
+    -------
+    X_new : (n, 3) ndarray
+    """
+    dlt = _piece("triangulate_linear", dlt)
+    C = -np.einsum("vji,vj->vi", np.nan_to_num(R), np.nan_to_num(t))
+    seen = np.isfinite(tracks[:, new, 0]) & registered[:, None]
+    seen[v] = False
+    partner = np.argmax(np.where(seen, np.linalg.norm(C - C[v], axis=1)[:, None], -1.0), axis=0)
+    X_new = np.full((len(new), 3), np.nan)
+    for u in np.unique(partner):
+        k = partner == u
+        X_new[k] = dlt(K @ np.c_[R[v], t[v]], K @ np.c_[R[u], t[u]], tracks[v, new[k]], tracks[u, new[k]])
+    return X_new
+
+
+def adjust(R, t, X, inliers, tracks, K, max_iter, *, lm=None):
+    """Bundle adjustment of the registered views and the model's points over the ``inliers`` observations.
+
+    Parameters
+    ----------
+    R, t : (V, 3, 3), (V, 3) ndarray
+        Poses, NaN for views not registered.
+    X : (T, 3) ndarray
+        Points, NaN for tracks not in the model.
+    inliers : (V, T) bool ndarray
+        The observations to use.
+    tracks : (V, T, 2) ndarray
+    K : (3, 3) ndarray
+    max_iter : int
+    lm : callable, optional
+        ``levenberg_marquardt``; by default the student's of notebook 04 (``yours.load``), the library's where it is
+        not written.
+
+    Returns
+    -------
+    R, t, X : ndarray
+        Adjusted copies.
+    """
+    lm = _piece("levenberg_marquardt", lm)
+    views, points = np.flatnonzero(np.isfinite(R[:, 0, 0])), np.flatnonzero(np.isfinite(X[:, 0]))
+    ci, pi = np.nonzero(inliers[np.ix_(views, points)])
+    cp, Xp, _ = lm(camera_params_from_Rt(R[views], t[views]), X[points], ci, pi, tracks[views[ci], points[pi]], K,
+                   max_iter=max_iter)
+    R, t, X = R.copy(), t.copy(), X.copy()
+    (R[views], t[views]), X[points] = Rt_from_camera_params(cp), Xp
+    return R, t, X
+
+
+def incremental_loop_reference(tracks, K, init, *, rng, threshold_px=4.0, min_angle_deg=1.5, min_points=15,
+                               growth=1.3, ba_iter=10):
+    """The reference of notebook 05's ``incremental_loop``, from the library's pieces: ``(R, t, X, order)``.
+
+    From the initial pair ``init`` (``choose_initial_pair``'s dict), repeat: the next view (the most triangulated
+    points), its pose by P3P-RANSAC and refinement, the new tracks triangulated from it and the registered view with
+    the widest baseline and filtered by :func:`accept_points_reference`; plain Levenberg–Marquardt over everything
+    whenever the number of views has grown by ``growth`` (and at the end), then the observations reprojecting
+    farther than ``threshold_px`` removed and the points left with fewer than two dropped.
+    """
+    V, T = tracks.shape[:2]
+    seen = np.isfinite(tracks[..., 0])
+    R, t, X = np.full((V, 3, 3), np.nan), np.full((V, 3), np.nan), np.full((T, 3), np.nan)
+    i, j = init["i"], init["j"]
+    R[i], t[i], R[j], t[j] = np.eye(3), np.zeros(3), init["R"], init["t"]
+    X[init["track"]] = init["X"]
+    registered, inliers = np.zeros(V, bool), seen.copy()
+    registered[[i, j]] = True
+    order, n_adjusted = [i, j], 2
+    K_all = np.repeat(np.asarray(K, float)[None], V, axis=0)
+    while True:
+        v = next_view_reference(seen & inliers, X, registered, min_points)
+        if v is not None:
+            have = np.flatnonzero(seen[v] & np.isfinite(X[:, 0]))
+            R[v], t[v], inl = register_view(X[have], tracks[v, have], K, threshold_px, rng=rng, ransac_loop=ransac)
+            inliers[v, have[~inl]] = False
+            registered[v] = True
+            order.append(v)
+            new = np.flatnonzero(np.isnan(X[:, 0]) & seen[v] & (seen[registered].sum(0) >= 2))
+            X_new = triangulate_new(tracks, K, R, t, v, new, registered, dlt=triangulate)
+            ok = accept_points_reference(X_new, K, R, t, tracks[:, new], seen[:, new] & registered[:, None],
+                                         threshold_px, min_angle_deg)
+            X[new[ok]] = X_new[ok]
+        if v is None or registered.sum() >= growth * n_adjusted:
+            R, t, X = adjust(R, t, X, inliers & registered[:, None], tracks, K, ba_iter, lm=levenberg_marquardt)
+            err = masked_reprojection_errors(K_all, R, t, np.nan_to_num(X), tracks, seen & registered[:, None])
+            inliers &= ~(err > threshold_px)
+            X[(inliers & registered[:, None]).sum(0) < 2] = np.nan
+            n_adjusted = registered.sum()
+        if v is None:
+            return R, t, X, order
+
+
+def _loop_scene(seed, n_points=120, n_views=10, outliers=0):
+    rng = np.random.default_rng(seed)
+    s = make_scene(n_points, n_views, layout="turntable", noise_px=0.5, rng=rng)
+    tracks = np.where(s.visible[..., None], s.x_meas, np.nan)
+    if outliers:
+        v, k = np.nonzero(s.visible)
+        pick = rng.choice(len(v), outliers, replace=False)
+        tracks[v[pick], k[pick]] += rng.choice([-1, 1], (outliers, 2)) * rng.uniform(20, 60, (outliers, 2))
+    init, _ = choose_initial_pair(tracks, s.K, rng=np.random.default_rng(seed), threshold_px=4.0)
+    return s, tracks, init
+
+
+def _diagnose_loop(out, s, tracks, init):
+    if not isinstance(out, tuple | list) or len(out) != 4:
+        return "incremental_loop must return (R, t, X, order)"
+    R, t, X, order = out
+    R, t, X = np.asarray(R, float), np.asarray(t, float), np.asarray(X, float)
+    V, T = tracks.shape[:2]
+    if R.shape != (V, 3, 3) or t.shape != (V, 3) or X.shape != (T, 3):
+        return f"R, t, X must have shapes ({V}, 3, 3), ({V}, 3), ({T}, 3); got {R.shape}, {t.shape}, {X.shape}"
+    order = [int(v) for v in order]
+    if order[:2] != [init["i"], init["j"]]:
+        return "order must start with the initial pair, init['i'] then init['j']"
+    reg = np.isfinite(R[:, 0, 0])
+    if reg.sum() <= 2:
+        return "only the initial pair is in the model: repeat until choose_next_view returns None"
+    if sorted(order) != sorted(np.flatnonzero(reg).tolist()):
+        return "order must list every registered view once, in the order they were registered"
+    ref = incremental_loop_reference(tracks, s.K, init, rng=np.random.default_rng(0))
+    ref_reg = np.isfinite(ref[0][:, 0, 0])
+    if reg.sum() < ref_reg.sum():
+        return (f"{int(reg.sum())} views registered where the reference registers {int(ref_reg.sum())}: triangulate "
+                "the new tracks of each registered view, so the next views see enough points")
+    if not np.all(np.isfinite(X) | np.isnan(X)):
+        return "X has inf entries: a track not in the model is a NaN row"
+    rig = (R[reg], t[reg], s.R[reg], s.t[reg])
+    Cs, Ct = -np.einsum("vji,vj->vi", rig[0], rig[1]), -np.einsum("vji,vj->vi", rig[2], rig[3])
+    A, B = Cs - Cs.mean(0), Ct - Ct.mean(0)
+    U, S, Wt = np.linalg.svd(B.T @ A)
+    D = np.diag([1, 1, np.sign(np.linalg.det(U @ Wt))])
+    Q = U @ D @ Wt                                                # rotation taking our frame to the truth
+    rot = [np.degrees(np.arccos(np.clip((np.trace(Rt @ (Re @ Q.T).T) - 1) / 2, -1, 1)))
+           for Re, Rt in zip(rig[0], rig[2])]
+    if np.mean(rot) > 0.5:
+        return (f"the cameras are {np.mean(rot):.2f}° off on average (after alignment): bundle-adjust when the model "
+                "has grown, and remove the observations reprojecting farther than threshold_px after each adjustment")
+    if (np.isfinite(X[:, 0])).sum() < 0.5 * np.isfinite(ref[2][:, 0]).sum():
+        return ("far fewer points than the reference: add every new track that accept_points accepts, "
+                "X[new[ok]] = X_new[ok]")
+    return None
+
+
+def check_incremental_loop(incremental_loop, verbose=True):
+    """Self-check of ``incremental_loop(tracks, K, init, *, rng, ...) -> (R, t, X, order)``: register, triangulate,
+    bundle-adjust and remove outliers until no view is left.
+
+    Cases: a synthetic turntable of 10 views (every view registered, the cameras within 0.5° after alignment), and the
+    same with wrong observations among the tracks (the outlier removal keeps them out of the cameras).
+
+    Examples
+    --------
+    >>> check_incremental_loop(incremental_loop_reference, verbose=False).passed
+    True
+    """
+    def case(seed, outliers=0):
+        def run(f):
+            s, tracks, init = _loop_scene(seed, outliers=outliers)
+            return _diagnose_loop(f(tracks.copy(), s.K, init, rng=np.random.default_rng(1)), s, tracks, init)
+        return run
+
+    return run_checks("incremental_loop", incremental_loop, [
+        ("a synthetic turntable, 10 views, 0.5 px noise: every view, the cameras right", case(0)),
+        ("the same with 40 wrong observations: removed after each bundle adjustment", case(1, outliers=40)),
+    ], verbose=verbose)
