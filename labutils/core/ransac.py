@@ -104,7 +104,7 @@ class RansacResult(tuple):
 
 def ransac(n_data: int, sample_size: int, fit: Callable, errors: Callable, threshold: float, *,
            rng: np.random.Generator, confidence: float = 0.999, max_iter: int = 10000, min_iter: int = 1,
-           chance=None, max_p_chance: float = 1e-3) -> RansacResult:
+           chance=None, max_p_chance: float = 0.01) -> RansacResult:
     """Adaptive RANSAC: sample, fit, score by inlier count, stop when ``confidence`` is reached.
 
     Parameters

@@ -8,7 +8,7 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
 from ..core.validation import as_calibration, as_matrix, as_rotation
-from .epipolar import canonical_sign, check_pair, transform_points
+from .epipolar import canonical_sign, check_pair, sampson_distance, transform_points
 from .triangulation import triangulate
 
 
@@ -151,12 +151,39 @@ def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike,
     return _cheirality_counts(decompose_essential(E), y1, y2)
 
 
+def _rotation_explains(E, x1, x2, K1, K2):
+    """None, or why a pure rotation explains the correspondences as well as E: Torr's GRIC (see
+    :func:`labutils.twoview.gric_model_selection`) with the rotation ``x2 ≃ K2 R K1⁻¹ x1`` (d = 2, k = 3) against
+    E (d = 3, k = 5), σ² estimated from E's Sampson residual (at least (10⁻⁶ px)²)."""
+    n = len(x1)
+    y1, y2 = (np.linalg.solve(K, np.c_[x, np.ones(n)].T).T for K, x in ((K1, x1), (K2, x2)))
+    y1, y2 = y1 / np.linalg.norm(y1, axis=1, keepdims=True), y2 / np.linalg.norm(y2, axis=1, keepdims=True)
+    U, _, Vt = np.linalg.svd(y2.T @ y1)                        # Kabsch: R y1 ≈ y2
+    H = K2 @ U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt @ np.linalg.inv(K1)
+    u = np.c_[x1, np.ones(n)] @ H.T
+    p = u[:, :2] / u[:, 2:]
+    J = (H[None, :2, :2] - p[:, :, None] * H[None, 2:3, :2]) / u[:, 2, None, None]     # ∂p/∂x1, (n, 2, 2)
+    r = p - x2                                                 # Sampson: x2 and x1 both noisy
+    e_R = float(np.einsum("ni,nij,nj->", r, np.linalg.inv(J @ J.transpose(0, 2, 1) + np.eye(2)), r))
+    F = np.linalg.inv(K2).T @ E @ np.linalg.inv(K1)
+    e_E = float(np.sum(sampson_distance(F, x1, x2) ** 2))
+    s2, l1, l2 = max(e_E / max(n - 5, 1), 1e-12), np.log(4.0), np.log(4.0 * n)
+    g_R, g_E = e_R / s2 + 2 * l1 * n + 3 * l2, e_E / s2 + 3 * l1 * n + 5 * l2
+    if g_R > g_E:
+        return None
+    return (f"no parallax: a pure rotation explains the correspondences as well as E (GRIC {g_R:.1f} against "
+            f"{g_E:.1f}; rms {np.sqrt(e_R / n):.3g} px against {np.sqrt(e_E / n):.3g} px): no baseline (x2 = x1, "
+            "or a pure rotation), so the translation is not determined")
+
+
 def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
     """Relative pose of camera 2 (camera 1 = ``[I | 0]``) from E, chosen by cheirality (H&Z Sec. 9.6.3).
 
     Each of the four poses of :func:`decompose_essential` is used to triangulate the correspondences
     (linear DLT on ``K⁻¹ x``); the pose that puts the most points in front of both cameras wins
-    (:func:`cheirality_counts` gives the four counts).
+    (:func:`cheirality_counts` gives the four counts). Correspondences that a pure rotation explains as
+    well as E (Torr's GRIC, as in :func:`labutils.twoview.gric_model_selection`, with the rotation
+    ``x2 ≃ K2 R K1⁻¹ x1`` (d = 2, k = 3) against E (d = 3, k = 5)) have no parallax: refused.
 
     Parameters
     ----------
@@ -176,7 +203,8 @@ def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLik
     Raises
     ------
     ValueError
-        Bad input, or no pose puts more points in front than every other (e.g. no baseline).
+        Bad input, no pose puts more points in front than every other, or no parallax (x2 = x1, or a pure
+        rotation: a rotation explains the correspondences as well as E).
 
     Examples
     --------
@@ -196,4 +224,7 @@ def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLik
     if counts[order[0]] == 0 or counts[order[0]] == counts[order[1]]:
         raise ValueError(f"cheirality cannot decide between the four poses (points in front: {counts}); "
                          "no baseline, or the correspondences do not fit E")
+    why = _rotation_explains(np.asarray(E, float), *check_pair(x1, x2, 1), as_calibration(K1), as_calibration(K2))
+    if why:
+        raise ValueError(why)
     return decompose_essential(E)[order[0]]
