@@ -19,11 +19,13 @@ from .epipolar import (
     sampson_distance,
 )
 from .essential import (
+    check_parallax,
     cheirality_counts,
     decompose_essential,
     essential_from_fundamental,
     fundamental_from_pose,
     pose_from_essential,
+    pure_rotation,
 )
 from .gold_standard import GoldStandardProblem, GoldStandardResult, fundamental_gold_standard
 from .triangulation import (
@@ -36,8 +38,8 @@ from .triangulation import (
 )
 
 __all__ = ["ModelSelection", "design_matrix", "fundamental_7point", "fundamental_8point", "fundamental_ransac",
-           "gric_model_selection", "hartley_normalisation", "homography_dlt", "sampson_distance",
-           "cheirality_counts", "decompose_essential", "essential_from_fundamental", "fundamental_from_pose",
-           "pose_from_essential", "GoldStandardProblem", "GoldStandardResult", "fundamental_gold_standard",
+           "gric_model_selection", "hartley_normalisation", "homography_dlt", "sampson_distance", "cheirality_counts",
+           "decompose_essential", "essential_from_fundamental", "fundamental_from_pose", "pose_from_essential",
+           "pure_rotation", "check_parallax", "GoldStandardProblem", "GoldStandardResult", "fundamental_gold_standard",
            "fundamental_residual", "ray_angles_deg", "triangulate", "triangulate_multiview", "triangulate_optimal",
            "triangulate_tracks"]

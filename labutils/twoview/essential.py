@@ -151,29 +151,99 @@ def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike,
     return _cheirality_counts(decompose_essential(E), y1, y2)
 
 
-def _rotation_explains(E, x1, x2, K1, K2):
-    """None, or why a pure rotation explains the correspondences as well as E: Torr's GRIC (see
-    :func:`labutils.twoview.gric_model_selection`) with the rotation ``x2 ≃ K2 R K1⁻¹ x1`` (d = 2, k = 3) against
-    E (d = 3, k = 5), σ² estimated from E's Sampson residual (at least (10⁻⁶ px)²)."""
+def pure_rotation(x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
+    """The rotation that best maps the rays of x1 onto those of x2 (no baseline), and the Sampson distances to it.
+
+    Without a baseline the views are related by the homography ``x2 ≃ K2 R K1⁻¹ x1`` (H&Z Sec. 8.4.2). R is the
+    orthogonal Procrustes (Kabsch) rotation of the unit rays, ``argmin Σ ‖R y1ᵢ - y2ᵢ‖²``; each correspondence's
+    distance is the Sampson distance to that homography with both pixels noisy, ``rᵀ (J Jᵀ + I)⁻¹ r`` with
+    ``r = π(H x1) - x2`` and ``J = ∂π(H x1)/∂x1``.
+
+    Parameters
+    ----------
+    x1, x2 : (N, 2) array_like
+    K1, K2 : (3, 3) array_like
+
+    Returns
+    -------
+    R : (3, 3) ndarray
+    d : (N,) ndarray
+        Pixels, not squared.
+
+    Examples
+    --------
+    >>> from labutils.core.geometry import rotation_from_angle_axis
+    >>> K = np.array([[500., 0, 320], [0, 500, 240], [0, 0, 1]]); R0 = rotation_from_angle_axis([0, 0.1, 0])
+    >>> x1 = np.array([[100., 50], [300, 400], [500, 100], [320, 240]])
+    >>> u = np.c_[x1, np.ones(4)] @ (K @ R0 @ np.linalg.inv(K)).T
+    >>> R, d = pure_rotation(x1, u[:, :2] / u[:, 2:], K, K)
+    >>> bool(np.allclose(R, R0)), bool(d.max() < 1e-9)
+    (True, True)
+    """
+    x1, x2 = check_pair(x1, x2, 2)
+    K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
     n = len(x1)
     y1, y2 = (np.linalg.solve(K, np.c_[x, np.ones(n)].T).T for K, x in ((K1, x1), (K2, x2)))
     y1, y2 = y1 / np.linalg.norm(y1, axis=1, keepdims=True), y2 / np.linalg.norm(y2, axis=1, keepdims=True)
-    U, _, Vt = np.linalg.svd(y2.T @ y1)                        # Kabsch: R y1 ≈ y2
-    H = K2 @ U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt @ np.linalg.inv(K1)
+    U, _, Vt = np.linalg.svd(y2.T @ y1)
+    R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
+    H = K2 @ R @ np.linalg.inv(K1)
     u = np.c_[x1, np.ones(n)] @ H.T
     p = u[:, :2] / u[:, 2:]
-    J = (H[None, :2, :2] - p[:, :, None] * H[None, 2:3, :2]) / u[:, 2, None, None]     # ∂p/∂x1, (n, 2, 2)
-    r = p - x2                                                 # Sampson: x2 and x1 both noisy
-    e_R = float(np.einsum("ni,nij,nj->", r, np.linalg.inv(J @ J.transpose(0, 2, 1) + np.eye(2)), r))
-    F = np.linalg.inv(K2).T @ E @ np.linalg.inv(K1)
-    e_E = float(np.sum(sampson_distance(F, x1, x2) ** 2))
-    s2, l1, l2 = max(e_E / max(n - 5, 1), 1e-12), np.log(4.0), np.log(4.0 * n)
-    g_R, g_E = e_R / s2 + 2 * l1 * n + 3 * l2, e_E / s2 + 3 * l1 * n + 5 * l2
-    if g_R > g_E:
-        return None
-    return (f"no parallax: a pure rotation explains the correspondences as well as E (GRIC {g_R:.1f} against "
-            f"{g_E:.1f}; rms {np.sqrt(e_R / n):.3g} px against {np.sqrt(e_E / n):.3g} px): no baseline (x2 = x1, "
-            "or a pure rotation), so the translation is not determined")
+    J = (H[None, :2, :2] - p[:, :, None] * H[None, 2:3, :2]) / u[:, 2, None, None]
+    r = p - x2
+    d2 = np.einsum("ni,nij,nj->n", r, np.linalg.inv(J @ J.transpose(0, 2, 1) + np.eye(2)), r)
+    return R, np.sqrt(np.maximum(d2, 0.0))
+
+
+def check_parallax(F: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
+    """Refuse correspondences that a pure rotation explains as well as F: no baseline, the translation unknown.
+
+    Torr's GRIC (as in :func:`labutils.twoview.gric_model_selection`) of the rotation of :func:`pure_rotation`
+    (a 2D variety, d = 2, k = 3 parameters) against F (d = 3, k = 7): ``GRIC = e / σ² + log(4) d n + log(4n) k``
+    with ``e`` the sum of squared Sampson distances and σ² = ``e_F / (n - 7)`` (at least (10⁻⁶ px)²). The
+    rotation wins when it leaves less than about ``0.39 n`` σ² more than F: with no baseline F over-fits the
+    noise (1 residual degree of freedom per point against the rotation's 2, so ``e_R - e_F ≈ (n + 4) σ²``) and the
+    rotation wins; a real baseline leaves the rotation the parallax, many σ² per point.
+
+    Parameters
+    ----------
+    F : (3, 3) array_like
+        Fitted to the correspondences.
+    x1, x2 : (N, 2) array_like
+        Inliers, N >= 8.
+    K1, K2 : (3, 3) array_like
+
+    Returns
+    -------
+    gric_rotation, gric_F : float
+        F wins (``gric_F < gric_rotation``).
+
+    Raises
+    ------
+    ValueError
+        Bad input, or the rotation wins (no parallax: x2 = x1, a pure rotation, or a baseline too short to see).
+
+    Examples
+    --------
+    >>> from labutils.core.synthetic import make_scene
+    >>> from labutils.twoview.epipolar import fundamental_8point
+    >>> s = make_scene(30, 2, noise_px=0.5, rng=np.random.default_rng(0)); x1, x2, _ = s.pair(0, 1)
+    >>> g_R, g_F = check_parallax(fundamental_8point(x1, x2), x1, x2, s.K, s.K); bool(g_F < g_R)
+    True
+    """
+    F = as_matrix(F, "F", (3, 3))
+    x1, x2 = check_pair(x1, x2, 8)
+    n = len(x1)
+    e_R = float(np.sum(pure_rotation(x1, x2, K1, K2)[1] ** 2))
+    e_F = float(np.sum(sampson_distance(F, x1, x2) ** 2))
+    s2, l1, l2 = max(e_F / (n - 7), 1e-12), np.log(4.0), np.log(4.0 * n)
+    g_R, g_F = e_R / s2 + 2 * l1 * n + 3 * l2, e_F / s2 + 3 * l1 * n + 7 * l2
+    if g_R <= g_F:
+        raise ValueError(f"no parallax: a pure rotation explains the correspondences as well as F (GRIC {g_R:.1f} "
+                         f"against {g_F:.1f}; rms {np.sqrt(e_R / n):.3g} px against {np.sqrt(e_F / n):.3g} px, "
+                         f"N = {n}): no baseline (x2 = x1, or a pure rotation), so the translation is not determined")
+    return g_R, g_F
 
 
 def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
@@ -181,9 +251,9 @@ def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLik
 
     Each of the four poses of :func:`decompose_essential` is used to triangulate the correspondences
     (linear DLT on ``K⁻¹ x``); the pose that puts the most points in front of both cameras wins
-    (:func:`cheirality_counts` gives the four counts). Correspondences that a pure rotation explains as
-    well as E (Torr's GRIC, as in :func:`labutils.twoview.gric_model_selection`, with the rotation
-    ``x2 ≃ K2 R K1⁻¹ x1`` (d = 2, k = 3) against E (d = 3, k = 5)) have no parallax: refused.
+    (:func:`cheirality_counts` gives the four counts). Correspondences that a pure rotation maps exactly
+    (:func:`pure_rotation`: x2 = x1, or no baseline, noise-free) are refused; with noise E itself cannot tell,
+    as it may be rough (E from F): :func:`check_parallax` compares the rotation with F.
 
     Parameters
     ----------
@@ -203,8 +273,8 @@ def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLik
     Raises
     ------
     ValueError
-        Bad input, no pose puts more points in front than every other, or no parallax (x2 = x1, or a pure
-        rotation: a rotation explains the correspondences as well as E).
+        Bad input, no pose puts more points in front than every other, or a rotation maps x1 onto x2 exactly
+        (no parallax).
 
     Examples
     --------
@@ -224,7 +294,7 @@ def pose_from_essential(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLik
     if counts[order[0]] == 0 or counts[order[0]] == counts[order[1]]:
         raise ValueError(f"cheirality cannot decide between the four poses (points in front: {counts}); "
                          "no baseline, or the correspondences do not fit E")
-    why = _rotation_explains(np.asarray(E, float), *check_pair(x1, x2, 1), as_calibration(K1), as_calibration(K2))
-    if why:
-        raise ValueError(why)
+    if pure_rotation(x1, x2, K1, K2)[1].max() < 1e-6:
+        raise ValueError("no parallax: a pure rotation maps x1 onto x2 exactly (x2 = x1, or no baseline), so the "
+                         "translation is not determined")
     return decompose_essential(E)[order[0]]
