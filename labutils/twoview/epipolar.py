@@ -653,9 +653,10 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
     A sample with a rank-deficient design matrix (e.g. 7 points on one plane) gives no candidate.
     After the loop the 8-point is fitted to the inliers, the inliers recomputed with it, and this is
     repeated (at most ``refits`` times) until the inlier set stops changing. The sampled F must be better than
-    chance (:mod:`labutils.core.ransac`): pairing each x1 with the x2 of another correspondence (up to 300 of
-    each) measures how often unrelated pixels fall within ``threshold_px`` of this F, ``p``; an inlier count
-    that ``B(N - 7, p)`` reaches in the models tried with probability above ``max_p_chance`` is refused.
+    chance (:mod:`labutils.core.ransac`): the fraction ``p`` of 4096 unrelated pairs, spread evenly (a lattice)
+    over the bounding boxes of x1 and of x2, within ``threshold_px`` of this F is the chance that an unrelated
+    correspondence is its inlier; an inlier count that ``B(N - 7, p)`` reaches in the models tried with
+    probability above ``max_p_chance`` is refused.
 
     Parameters
     ----------
@@ -706,10 +707,9 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
             raise ValueError(f"all pixels {name} coincide (within threshold_px = {threshold_px:g}): no F is determined")
     if np.abs(x2 - x1).max() <= threshold_px:
         raise ValueError(f"no motion: every |x2 - x1| <= threshold_px = {threshold_px:g}, so F is not determined")
-    k = np.linspace(0, len(x1) - 1, min(len(x1), 300)).astype(int)
-    i, j = np.repeat(k, len(k)), np.tile(k, len(k))
-    i, j = i[i != j], j[i != j]                                  # unrelated pairs (x1_i, x2_j)
-    chance = lambda F: (np.sum(sampson_distance(F, x1[i], x2[j]) < threshold_px) + 1) / (i.size + 2)  # noqa: E731
+    u = (np.arange(4096)[:, None] * (1597 ** np.arange(4) % 4096) % 4096 + 0.5) / 4096     # a 4D lattice
+    r1, r2 = x1.min(0) + u[:, :2] * np.ptp(x1, axis=0), x2.min(0) + u[:, 2:] * np.ptp(x2, axis=0)
+    chance = lambda F: (np.sum(sampson_distance(F, r1, r2) < threshold_px) + 1) / (len(u) + 2)  # noqa: E731
     F, inliers, _ = ransac(len(x1), 7, lambda idx: _seven_point(x1[idx], x2[idx]),
                            lambda F: sampson_distance(F, x1, x2), threshold_px, rng=rng,
                            confidence=confidence, max_iter=max_iter, chance=chance, max_p_chance=max_p_chance)

@@ -155,9 +155,10 @@ def pure_rotation(x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) ->
     """The rotation that best maps the rays of x1 onto those of x2 (no baseline), and the Sampson distances to it.
 
     Without a baseline the views are related by the homography ``x2 ≃ K2 R K1⁻¹ x1`` (H&Z Sec. 8.4.2). R is the
-    orthogonal Procrustes (Kabsch) rotation of the unit rays, ``argmin Σ ‖R y1ᵢ - y2ᵢ‖²``; each correspondence's
-    distance is the Sampson distance to that homography with both pixels noisy, ``rᵀ (J Jᵀ + I)⁻¹ r`` with
-    ``r = π(H x1) - x2`` and ``J = ∂π(H x1)/∂x1``.
+    orthogonal Procrustes (Kabsch) rotation of the unit rays, ``argmin Σ ‖R y1ᵢ - y2ᵢ‖²``, fitted again (three
+    times) to the correspondences within three times the median distance, so that a few outliers do not drag it;
+    each correspondence's distance is the Sampson distance to that homography with both pixels noisy,
+    ``rᵀ (J Jᵀ + I)⁻¹ r`` with ``r = π(H x1) - x2`` and ``J = ∂π(H x1)/∂x1``.
 
     Parameters
     ----------
@@ -185,26 +186,34 @@ def pure_rotation(x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) ->
     n = len(x1)
     y1, y2 = (np.linalg.solve(K, np.c_[x, np.ones(n)].T).T for K, x in ((K1, x1), (K2, x2)))
     y1, y2 = y1 / np.linalg.norm(y1, axis=1, keepdims=True), y2 / np.linalg.norm(y2, axis=1, keepdims=True)
-    U, _, Vt = np.linalg.svd(y2.T @ y1)
-    R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
-    H = K2 @ R @ np.linalg.inv(K1)
-    u = np.c_[x1, np.ones(n)] @ H.T
-    p = u[:, :2] / u[:, 2:]
-    J = (H[None, :2, :2] - p[:, :, None] * H[None, 2:3, :2]) / u[:, 2, None, None]
-    r = p - x2
-    d2 = np.einsum("ni,nij,nj->n", r, np.linalg.inv(J @ J.transpose(0, 2, 1) + np.eye(2)), r)
-    return R, np.sqrt(np.maximum(d2, 0.0))
+    use = np.ones(n, bool)
+    for _ in range(4):
+        U, _, Vt = np.linalg.svd(y2[use].T @ y1[use])
+        R = U @ np.diag([1, 1, np.linalg.det(U @ Vt)]) @ Vt
+        H = K2 @ R @ np.linalg.inv(K1)
+        u = np.c_[x1, np.ones(n)] @ H.T
+        p = u[:, :2] / u[:, 2:]
+        J = (H[None, :2, :2] - p[:, :, None] * H[None, 2:3, :2]) / u[:, 2, None, None]
+        r = p - x2
+        d = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", r, np.linalg.inv(J @ J.transpose(0, 2, 1) + np.eye(2)), r),
+                               0.0))
+        use = d <= 3 * np.median(d)
+        if use.sum() < 2:
+            break
+    return R, d
 
 
 def check_parallax(F: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> tuple:
     """Refuse correspondences that a pure rotation explains as well as F: no baseline, the translation unknown.
 
-    Torr's GRIC (as in :func:`labutils.twoview.gric_model_selection`) of the rotation of :func:`pure_rotation`
-    (a 2D variety, d = 2, k = 3 parameters) against F (d = 3, k = 7): ``GRIC = e / σ² + log(4) d n + log(4n) k``
-    with ``e`` the sum of squared Sampson distances and σ² = ``e_F / (n - 7)`` (at least (10⁻⁶ px)²). The
-    rotation wins when it leaves less than about ``0.39 n`` σ² more than F: with no baseline F over-fits the
-    noise (1 residual degree of freedom per point against the rotation's 2, so ``e_R - e_F ≈ (n + 4) σ²``) and the
-    rotation wins; a real baseline leaves the rotation the parallax, many σ² per point.
+    Torr's GRIC (Torr 1998; as in :func:`labutils.twoview.gric_model_selection`) of the rotation of
+    :func:`pure_rotation` (a 2D variety, d = 2, k = 3 parameters) against F (d = 3, k = 7):
+    ``GRIC = Σ ρ(eᵢ² / σ²) + log(4) d n + log(4n) k`` with ``eᵢ`` the Sampson distances, σ² the median of F's
+    squared distances over 0.455 (the median of χ²(1); at least (10⁻⁶ px)²), and Torr's robust
+    ``ρ(x) = min(x, 2 (4 - d))``, so that an outlier costs each model a constant (F's inliers may hold a few
+    outliers that happen to lie near their epipolar lines, which a rotation cannot follow). With no baseline F
+    over-fits the noise (1 residual degree of freedom per point against the rotation's 2) and the rotation wins
+    by about ``0.39 n``; a real baseline leaves the rotation the parallax, capped at 4 per point against F's ~1.
 
     Parameters
     ----------
@@ -235,13 +244,14 @@ def check_parallax(F: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2
     F = as_matrix(F, "F", (3, 3))
     x1, x2 = check_pair(x1, x2, 8)
     n = len(x1)
-    e_R = float(np.sum(pure_rotation(x1, x2, K1, K2)[1] ** 2))
-    e_F = float(np.sum(sampson_distance(F, x1, x2) ** 2))
-    s2, l1, l2 = max(e_F / (n - 7), 1e-12), np.log(4.0), np.log(4.0 * n)
-    g_R, g_F = e_R / s2 + 2 * l1 * n + 3 * l2, e_F / s2 + 3 * l1 * n + 7 * l2
+    d_R, d_F = pure_rotation(x1, x2, K1, K2)[1], sampson_distance(F, x1, x2)
+    s2, l1, l2 = max(np.median(d_F ** 2) / 0.455, 1e-12), np.log(4.0), np.log(4.0 * n)
+    g_R = np.minimum(d_R ** 2 / s2, 4.0).sum() + 2 * l1 * n + 3 * l2
+    g_F = np.minimum(d_F ** 2 / s2, 2.0).sum() + 3 * l1 * n + 7 * l2
+    e_R, e_F = float(np.median(d_R ** 2)), float(np.median(d_F ** 2))
     if g_R <= g_F:
         raise ValueError(f"no parallax: a pure rotation explains the correspondences as well as F (GRIC {g_R:.1f} "
-                         f"against {g_F:.1f}; rms {np.sqrt(e_R / n):.3g} px against {np.sqrt(e_F / n):.3g} px, "
+                         f"against {g_F:.1f}; median {np.sqrt(e_R):.3g} px against {np.sqrt(e_F):.3g} px, "
                          f"N = {n}): no baseline (x2 = x1, or a pure rotation), so the translation is not determined")
     return g_R, g_F
 
