@@ -644,7 +644,7 @@ def _seven_point(x1, x2):
 
 def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator, threshold_px: float = 1.0,
                        confidence: float = 0.999, max_iter: int = 10000, refits: int = 5,
-                       max_p_chance: float = 0.01) -> tuple:
+                       max_p_chance: float = 0.05) -> tuple:
     """Robust F: adaptive RANSAC on minimal 7-point samples, then the 8-point on the inliers (H&Z Alg. 11.4).
 
     Why 7-point samples: a sample of 7 instead of 8 needs fewer trials for the same confidence
