@@ -9,7 +9,7 @@ Two things the bare loop does not say, and :func:`ransac` does:
   probabilistic criterion to detect rigid point matches", the ORSA of Moisan, Moulon & Monasse 2012).
   Under the null hypothesis the data are unrelated (e.g. pixels independent of the points): a model
   fitted to a minimal sample then counts each of the other ``n - s`` items as an inlier with some
-  probability ``p`` (the fraction of the image, or of the pairs, that the threshold accepts: the
+  probability ``p`` (the fraction of the image, or of the image pairs, that the threshold accepts: the
   caller's ``chance``), independently, so its extra inliers are binomial ``B(n - s, p)``. Having tried
   ``M`` models, the probability that one of them reaches ``k`` inliers by chance is at most
   ``M · P(B(n - s, p) >= k - s)`` (a union bound; the "number of false alarms" of a-contrario
