@@ -21,6 +21,27 @@ lives in the stage package of its idea (``labutils.twoview``, ``labutils.sfm``, 
 References: Hartley & Zisserman, *Multiple View Geometry*, 2nd ed. (cited as H&Z).
 """
 import importlib
+import os
+import sys
+
+
+def _interrupted_while_loading(signum, frame):
+    # exit at once: an exception raised here could surface inside a C extension's import (numpy's) as another error;
+    # nothing has been written yet, so there is nothing to clean up
+    print("error: interrupted", file=sys.stderr, flush=True)
+    os._exit(130)
+
+
+# ``python -m labutils.<command>``: a Ctrl-C while the command still imports numpy, scipy, OpenCV is one line and exit
+# status 130, not a traceback through the imports (labutils.core.cli.run takes Ctrl-C back once the command runs).
+_ORIG_ARGV = getattr(sys, "orig_argv", [])
+if sys.argv[:1] == ["-m"] and "-m" in _ORIG_ARGV[:-1] and \
+        _ORIG_ARGV[_ORIG_ARGV.index("-m") + 1].startswith("labutils."):
+    import signal
+    try:
+        signal.signal(signal.SIGINT, _interrupted_while_loading)
+    except ValueError:
+        pass
 
 _EXPORTS = {
     "core": ["KRt_from_P", "P_from_KRt", "Scene", "Views", "align_cameras", "align_similarity",

@@ -16,3 +16,8 @@ def dino():
         return labutils.load_dino()
     except labutils.DataNotFoundError as exc:
         pytest.skip(f"real data missing: {str(exc).splitlines()[0]}")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "nbgrader: runs nbgrader's command line on a course in a tmp folder "
+                                       "(about 20 s; deselect with -m 'not nbgrader')")

@@ -24,7 +24,8 @@ MAX_ROOMS = 16
 # only imports the command's main from its stage and runs it.
 ENTRY_POINTS = {"carve": "model", "bench": "tools"}
 # Every command answers --help without a warning; the thin entry points and the stages' __main__ among them.
-COMMANDS = ["sfm", "bundle", "match", "carve", "calibrate", "data", "bench", "exercises", "tools.notebook_filter"]
+COMMANDS = ["sfm", "bundle", "match", "carve", "calibrate", "data", "bench", "exercises", "reconstruct",
+            "tools.notebook_filter"]
 
 # Files longer than this hold more than one idea unless listed here with the reason.
 MAX_LINES = 600

@@ -516,8 +516,10 @@ def test_cli_help():
     ("no_folder", r"^error: missing/calib.json: the folder missing does not exist \(--out\)$"),
     ("bad_board", r"^error: argument --board: expected COLUMNSxROWS"),
     ("undistort_alone", r"^error: --undistort and --undistort-out go together"),
-    ("undistort_in_place", r"^error: .*board01.png: --undistort-out would overwrite this input photo; choose another "
-                           r"folder$"),
+    ("undistort_in_place", r"^error: .*board01.png: --undistort-out \(for .*board01.png\) is an input photo "
+                           r"\(.*board01.png\); it would be overwritten: choose another file$"),
+    ("k_out_is_out", r"^error: calib.json: --k-out and --out name the same file \(calib.json\); give each its own "
+                     r"file$"),
 ])
 def test_cli_failures_are_one_line_and_write_nothing(tmp_path, photo_dir, case, message):
     import re
@@ -530,12 +532,14 @@ def test_cli_failures_are_one_line_and_write_nothing(tmp_path, photo_dir, case, 
             "no_folder": [imgs[0]],
             "bad_board": [imgs[0]],
             "undistort_alone": [imgs[0], "--undistort", imgs[1]],
-            "undistort_in_place": [*imgs, "--undistort", imgs[1], "--undistort-out", photo_dir]}[case]
+            "undistort_in_place": [*imgs, "--undistort", imgs[1], "--undistort-out", photo_dir],
+            "k_out_is_out": [*imgs]}[case]
     board = "9-6" if case == "bad_board" else "9x6"
     out = "missing/calib.json" if case == "no_folder" else "calib.json"
+    k_out = "calib.json" if case == "k_out_is_out" else "K.txt"
     before = sorted(p.name for p in tmp_path.iterdir())
     photos_before = {p.name: p.read_bytes() for p in photo_dir.iterdir()}
-    r = _cli(*args, "--board", board, "--out", out, "--k-out", "K.txt", "--quiet", cwd=tmp_path)
+    r = _cli(*args, "--board", board, "--out", out, "--k-out", k_out, "--quiet", cwd=tmp_path)
     assert r.returncode == 2 and r.stdout == ""
     assert len(r.stderr.strip().splitlines()) == 1 and re.search(message, r.stderr.strip()), r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == before          # nothing written, no temporary file

@@ -26,11 +26,16 @@ from labutils.model.carving import (
     mesh_volume,
     project_with_depth,
     render_silhouette,
+    segment_views,
     signed_distance_map,
     silhouette,
     silhouette_ious,
     surface_mesh,
+    threshold_ladder,
+    unsure_views,
+    unsure_warning,
 )
+from labutils.model.carving.silhouettes import QUANTISATION
 from labutils.model.synthetic import make_snowman
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -114,13 +119,17 @@ def test_bad_input_raises_naming_the_argument(scene):
         (lambda: silhouette(scene.images[0], model, threshold=-1), "threshold must be >= 0"),
         (lambda: colour_distance(scene.images[0], "blue"), "model must be a BackgroundModel"),
         (lambda: background_model(scene.images[:2], border_px=0), "border_px must be >= 1"),
-        (lambda: background_model(scene.images[:2], lightness_weight=0), "lightness_weight must be > 0"),
+        (lambda: background_model(scene.images[:2], n_clusters=0), "n_clusters must be >= 1"),
+        (lambda: background_model(scene.images[:2], false_alarm=0), "false_alarm must be > 0"),
+        (lambda: segment_views(scene.images[:3], P), "images has 3 views for 16 cameras"),
+        (lambda: unsure_views([[0.9]]), r"agreement must be a \(V,\) array"),
+        (lambda: threshold_ladder(0.0), "threshold must be > 0"),
         (lambda: background_model([]), "images is empty"),
         (lambda: clean_mask(masks[0], min_component=2), "min_component must be <= 1"),
         (lambda: VoxelGrid.from_box(scene.box, "many"), "n .* must be a number"),
         (lambda: carve(masks, P, grid, band_voxels=0), "band_voxels must be > 0"),
         (lambda: surface_mesh(masks), "carving must be a Carving"),
-        (lambda: choose_threshold([np.zeros((4, 4))] * 16, P, candidates=()), "candidates is empty"),
+        (lambda: choose_threshold([np.zeros((4, 4))] * 16, P, ()), "candidates is empty"),
     ]:
         with pytest.raises(ValueError, match=message):
             call()
@@ -276,8 +285,74 @@ def test_choose_threshold_prefers_consistent_masks(scene):
     d = [colour_distance(im, model) for im in scene.images]
     # the median colour distance on the object cuts the darker half of each sphere out of the masks
     cut = float(np.median(np.concatenate([di[m] for di, m in zip(d, scene.masks)])))
-    best, scores = choose_threshold(d, scene.P, candidates=(0.5, 2.5, cut), every=4)
-    assert best in (0.5, 2.5) and scores[2, 0] < scores[:2, 0].min() - 0.1, scores
+    low = (model.threshold, 2 * model.threshold)
+    best, scores = choose_threshold(d, scene.P, low + (cut,), every=4)
+    assert best in low and scores[2, 0] < scores[:2, 0].min() - 0.1, scores
+
+
+# --- silhouettes that generalise: lightness, several tones, a self-check ----------------------------------------------
+
+
+SCENES = {   # object's paint, background (one colour, or a wall above a table)
+    "light grey on black": ((190, 190, 190), (10, 10, 10)),
+    "dark grey on white": ((50, 50, 50), (220, 220, 220)),
+    "black on grey": ((25, 25, 25), (150, 150, 150)),
+    "red on green": ((200, 40, 40), (40, 150, 60)),
+    "blue on a black wall and a white table": ((50, 80, 200), [(15, 15, 15), (200, 200, 200)]),
+    "light grey on a black wall and a dark grey table": ((200, 200, 200), [(10, 10, 10), (45, 45, 45)]),
+    "yellow on a blue wall and a white table": ((230, 200, 60), [(60, 75, 170), (210, 210, 210)]),
+}
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_rendered_objects_of_several_colours_on_several_backgrounds(name):
+    """Lightness counts as much as hue: every view's mask matches the exact silhouette, the model carved from the
+    masks explains every one of them (IoU >= 0.9), and the self-check is sure of every view."""
+    colour, background = SCENES[name]
+    sc = make_snowman(8, rng=np.random.default_rng(3), image_size=(100, 75), f=130.0, colour=colour,
+                      background=background, noise=4.0, elevations=(20.0,))
+    r = segment_views(sc.images, sc.P, n=24, n_check=40)
+    truth = [mask_iou(m, t) for m, t in zip(r.masks, sc.masks)]
+    assert min(truth) > 0.97, (name, truth)
+    assert r.unsure.size == 0 and r.agreement.min() >= 0.9, (name, r.agreement)
+    assert r.model.threshold <= r.threshold <= r.candidates[-1]
+    grid = VoxelGrid.from_box(bounding_box_from_silhouettes(r.masks, sc.P), 48)
+    V, F, _ = surface_mesh(carve(r.masks, sc.P, grid))
+    assert silhouette_ious(V, F, r.masks, sc.P).min() >= 0.9
+
+
+def test_background_of_two_tones_gets_a_cluster_each():
+    sc = make_snowman(4, rng=np.random.default_rng(4), image_size=(80, 60), f=105.0, colour=(230, 200, 60),
+                      background=[(15, 15, 15), (200, 200, 200)], noise=2.0)
+    model = background_model(sc.images, n_clusters=4)
+    L = np.sort(model.means[:, 0])
+    assert L[0] < 15 and L[-1] > 70              # the black wall and the white table are both background
+    d = colour_distance(sc.images[0], model)
+    assert np.all(d[~sc.masks[0]] < 30 * model.threshold) and np.median(d[sc.masks[0]]) > 10 * model.threshold
+    assert abs(np.mean(colour_distance(sc.images[1], model)[:4] > model.threshold) - 0.01) < 0.03
+
+
+def test_ambiguous_colours_are_reported_unsure(tmp_path):
+    """A grey object whose shaded side takes the grey of the table it stands on: no colour threshold can cut it
+    out, and the segmentation says so (in the library, and as one warning line from the command line)."""
+    sc = make_snowman(8, rng=np.random.default_rng(5), image_size=(100, 75), f=130.0, colour=(200, 200, 200),
+                      background=[(10, 10, 10), (90, 90, 90)], noise=2.0, elevations=(20.0,))
+    r = segment_views(sc.images, sc.P, n=24, n_check=40)
+    assert r.unsure.size >= 4 and r.warning().startswith(f"unsure silhouettes in {r.unsure.size} of 8 views")
+    par = write_scene(tmp_path, sc)
+    out = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--quiet", cwd=tmp_path)
+    assert out.returncode == 0 and (tmp_path / "hull.ply").is_file(), out.stderr
+    lines = out.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("carve: warning: unsure silhouettes in "), out.stderr
+    assert "view0" in lines[0] and lines[0].endswith("look at --masks")
+
+
+def test_unsure_views_and_warning():
+    assert unsure_views([0.95, 0.5, np.nan, 0.9]).tolist() == [1, 2]          # NaN (no model) is unsure too
+    assert unsure_warning([0.99, 0.95]) is None
+    w = unsure_warning(np.linspace(0.5, 0.8, 7))
+    assert w.startswith("unsure silhouettes in 7 of 7 views: 0 (IoU 0.50 with") and "and 3 more" in w
+    assert "\n" not in w
 
 
 # --- the reference library -----------------------------------------------------------------------------------------
@@ -292,22 +367,31 @@ def test_projection_agrees_with_opencv(scene):
         assert np.allclose(depth, X @ R[2] + t[2])
 
 
-def test_colour_distance_is_the_distance_to_the_border_colours_in_opencv_lab():
-    """Brute force from OpenCV's CIELAB: each pixel's distance to the nearest cell next to a border colour."""
+def test_colour_distance_is_the_mahalanobis_distance_in_opencv_lab():
+    """Brute force from OpenCV's CIELAB: each pixel's Mahalanobis distance to the nearest cluster of the border's
+    colours, with the cluster's covariance (plus the quantisation) inverted by numpy."""
     rng = np.random.default_rng(0)
     img = rng.integers(0, 256, size=(20, 30, 3), dtype=np.uint8)
-    w = 0.3
-    model = background_model([img], min_count=1, lightness_weight=w)
-    lab = cv2.cvtColor(img, cv2.COLOR_RGB2LAB).astype(float)
-    cells = np.stack([np.floor(lab[..., 0] * w * 100 / 255 + 1e-9), lab[..., 1], lab[..., 2]], axis=-1).reshape(-1, 3)
+    img[:4] = img[-4:] = (30, 40, 50)
+    img[:, :4] = (200, 190, 20)
+    img[:, -4:] = (200, 190, 20)
+    img[:, :4, 0] += rng.integers(0, 9, size=(20, 4), dtype=np.uint8)         # a spread along red
+    model = background_model([img], n_clusters=2)
+    lab = cv2.cvtColor(img.astype(np.float32) / 255, cv2.COLOR_RGB2LAB).reshape(-1, 3).astype(float)
     border = np.zeros((20, 30), bool)
     border[:4] = border[-4:] = True
     border[:, :4] = border[:, -4:] = True
-    offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    background = np.unique((cells[border.ravel()][:, None] + offsets[None]).reshape(-1, 3), axis=0)
-    brute = np.sqrt(((cells[:, None] - background[None]) ** 2).sum(-1)).min(axis=1)
-    assert np.allclose(colour_distance(img, model).ravel(), brute)
-    assert np.all(colour_distance(img, model)[border] == 0)
+    grey = np.all(img == (30, 40, 50), axis=-1)
+    groups = [lab[(border & grey).ravel()], lab[(border & ~grey).ravel()]]
+    brute = np.full(len(lab), np.inf)
+    for g in groups:
+        inv = np.linalg.inv(np.cov(g.T) + QUANTISATION ** 2 * np.eye(3))
+        z = lab - g.mean(axis=0)
+        brute = np.minimum(brute, np.sqrt(np.einsum("ij,jk,ik->i", z, inv, z)))
+    assert model.n_clusters == 2
+    assert np.allclose(colour_distance(img, model).ravel(), brute, rtol=1e-4, atol=1e-3)
+    d_border = colour_distance(img, model)[border]
+    assert model.threshold == pytest.approx(np.quantile(d_border, 0.99), rel=1e-4)
 
 
 # --- real data -----------------------------------------------------------------------------------------------------
@@ -323,12 +407,63 @@ def test_temple_box_from_silhouettes():
     idx = list(range(0, temple.n_views, 4))
     images = [temple.image(i) for i in idx]
     model = background_model(images)
-    masks = [silhouette(im, model, threshold=0.5) for im in images]
+    masks = [silhouette(im, model) for im in images]
     box = bounding_box_from_silhouettes(masks, temple.P[idx])
     # the data set's tight box lies inside ours, and ours is at most 40 % wider on any axis (the hull is
     # wider than the object, plus the margin)
     assert np.all(box[0] <= TEMPLE_BOX[0] + 1e-3) and np.all(box[1] >= TEMPLE_BOX[1] - 1e-3), box
     assert np.all(box[1] - box[0] < 1.4 * (TEMPLE_BOX[1] - TEMPLE_BOX[0])), box
+
+
+@pytest.fixture(scope="module")
+def temple_views():
+    from labutils.data.loaders import DataNotFoundError, load_temple
+
+    try:
+        temple = load_temple()
+    except DataNotFoundError as exc:
+        pytest.skip(f"real data missing: {str(exc).splitlines()[0]}")
+    idx = list(range(0, temple.n_views, 4))                  # 12 views at half size: seconds, not minutes
+    return [temple.image(i)[::2, ::2] for i in idx], np.diag([0.5, 0.5, 1.0]) @ temple.P[idx]
+
+
+TEMPLE_VARIANTS = {
+    "colour": lambda a: a,
+    "darkened": lambda a: np.round(a * 0.5).astype(np.uint8),
+    "brightened": lambda a: np.clip(np.round(a * 1.6), 0, 255).astype(np.uint8),
+    "inverted (dark on light)": lambda a: 255 - a,
+}
+
+
+@pytest.mark.parametrize("variant", list(TEMPLE_VARIANTS))
+def test_temple_silhouettes_agree_in_every_view(temple_views, variant):
+    images, P = temple_views
+    r = segment_views([TEMPLE_VARIANTS[variant](im) for im in images], P, n=32, n_check=64)
+    assert r.unsure.size == 0 and r.agreement.min() >= 0.9, (variant, r.agreement)
+
+
+def test_grey_temple_is_reported_unsure(temple_views):
+    """In grey, the temple's shaded faces and the glow of the black cloth around it have the same lightness: no
+    colour threshold separates them (the agreement stays near 0.8), and the check says so."""
+    images, P = temple_views
+    grey = [np.repeat(cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)[..., None], 3, axis=-1) for im in images]
+    r = segment_views(grey, P, n=32, n_check=64)
+    assert r.unsure.size >= 3 and r.warning() is not None
+
+
+def test_dino_silhouettes_agree_in_every_view():
+    from labutils.data.loaders import DataNotFoundError, load_dino
+
+    try:
+        dino = load_dino()
+        if dino.image_paths is None:
+            raise DataNotFoundError("the dinosaur's images are missing")
+    except DataNotFoundError as exc:
+        pytest.skip(f"real data missing: {str(exc).splitlines()[0]}")
+    idx = list(range(0, dino.n_views, 3))
+    r = segment_views([dino.image(i)[::2, ::2] for i in idx], np.diag([0.5, 0.5, 1.0]) @ dino.P[idx], n=32,
+                      n_check=64)
+    assert r.unsure.size == 0 and r.agreement.min() >= 0.9, r.agreement
 
 
 # --- the camera file and the command line --------------------------------------------------------------------------
@@ -411,13 +546,13 @@ def test_cli_warns_when_the_silhouettes_do_not_match(tmp_path, small_scene):
         tok[19] = repr(float(tok[19]) + (0.2 if i % 2 else -0.2))
         lines[i] = " ".join(tok)
     par.write_text("\n".join(lines) + "\n")
-    r = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 2.5, "--quiet", cwd=tmp_path)
+    r = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 10, "--quiet", cwd=tmp_path)
     assert r.returncode == 0 and (tmp_path / "hull.ply").is_file(), r.stderr
     warning = [line for line in r.stderr.splitlines() if line.startswith("carve: warning: ")]
     assert len(warning) == 1 and "median IoU 0.1" in warning[0] and "look at --masks" in warning[0], r.stderr
     (tmp_path / "good").mkdir()
     par = write_scene(tmp_path / "good", small_scene)
-    r = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 2.5, "--quiet", cwd=par.parent)
+    r = _cli(par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 10, "--quiet", cwd=par.parent)
     assert r.returncode == 0 and "warning" not in r.stderr, r.stderr       # a good model: no warning
 
 
@@ -434,7 +569,7 @@ def _listing(folder):
                                   "no_masks_folder", "empty_carve", "bad_grid", "bad_threshold"])
 def test_cli_errors(tmp_path, small_scene, case):
     par = write_scene(tmp_path, small_scene)
-    args = [par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 2.5]
+    args = [par.name, "--out", "hull.ply", "--grid", 24, "--threshold", 10]
     lines = par.read_text().splitlines()
     expect = None
     if case == "missing_par":

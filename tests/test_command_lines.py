@@ -4,8 +4,10 @@ the work; output is written atomically with the usual mode, and nothing is left 
 disk is full); no RuntimeWarning; progress on stderr and a clean stdout."""
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -146,3 +148,148 @@ def test_bench_help_and_bad_subcommand():
     proc = run("bench", "ba", "--help")
     assert proc.returncode == 0 and "--quick" in proc.stdout
     one_line_error(run("bench", "nothing"), "nothing")
+
+
+# ------------------------------------------------------------------------------------------------- outputs vs inputs
+def _snapshot(folder):
+    return {p.relative_to(folder).as_posix(): (p.read_bytes(), p.stat().st_mtime_ns)
+            for p in sorted(Path(folder).rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def inputs(tracks_and_K, bal_problem):
+    """One folder with an input of each command: tracks, K, a BAL problem, a camera file, a folder of images."""
+    d = tracks_and_K
+    os.replace(bal_problem, d / "p.txt")
+    (d / "par.txt").write_text("1\nimg.png 1 0 0 0 1 0 0 0 1 1 0 0 0 1 0 0 0 1 0 0 5\n")
+    (d / "img.png").write_bytes(b"not really an image")
+    (d / "imgs").mkdir()
+    for name in ("a.png", "b.png"):
+        (d / "imgs" / name).write_bytes(b"not really an image")
+    os.symlink("tracks.txt", d / "link.txt")
+    os.link(d / "K.txt", d / "K-hard.txt")
+    return d
+
+
+@pytest.mark.parametrize("module, args, named", [
+    ("sfm", ["tracks.txt", "K.txt", "--out", "tracks.txt"], "tracks.txt: --out is the input TRACKS file"),
+    ("sfm", ["tracks.txt", "K.txt", "--out", "./K.txt"], "./K.txt: --out is the input K file"),
+    ("sfm", ["link.txt", "K.txt", "--out", "tracks.txt"], "tracks.txt: --out is the input TRACKS file (link.txt)"),
+    ("sfm", ["tracks.txt", "K-hard.txt", "--out", "r.json", "--ply", "K.txt"], "K.txt: --ply is the input K file"),
+    ("sfm", ["tracks.txt", "K.txt", "--out", "r.json", "--ply", "r.json"], "r.json: --ply and --out name the same"),
+    ("sfm", ["tracks.txt", "K.txt", "--out", "r.json", "--ply", "imgs/a.png", "--images", "imgs"],
+     "imgs/a.png: --ply is an input image"),
+    ("bundle", ["p.txt", "--out", "p.txt"], "p.txt: --out is the input PROBLEM file"),
+    ("carve", ["par.txt", "--out", "par.txt"], "par.txt: --out is the input PAR_FILE"),
+    ("carve", ["par.txt", "--out", "img.png"], "img.png: --out is an input image"),
+    ("carve", ["par.txt", "--out", "imgs/img_mask.png", "--masks", "imgs"], "a --masks file and --out name the same"),
+    ("match", ["imgs", "K.txt", "--out", "K.txt"], "K.txt: --out is the input K file"),
+    ("match", ["imgs", "K.txt", "--out", "imgs/b.png"], "imgs/b.png: --out is an input image"),
+])
+def test_an_output_that_is_an_input_or_another_output_is_refused_before_any_work(inputs, module, args, named):
+    """Issue 21: these overwrote their input and exited 0. Now: one line naming the file, exit 2, nothing touched."""
+    before = _snapshot(inputs)
+    proc = run(module, *args, cwd=inputs, timeout=60)
+    one_line_error(proc, named)
+    assert _snapshot(inputs) == before          # inputs untouched, nothing written, no temporary file
+
+
+@pytest.mark.parametrize("module, args", [
+    ("sfm", ["tracks.txt", "K.txt", "--out", "r.json", "--seed", "-1"]),
+    ("match", ["imgs", "K.txt", "--out", "t.txt", "--seed", "x"]),
+])
+def test_a_bad_seed_blames_the_seed(inputs, module, args):
+    before = _snapshot(inputs)
+    one_line_error(run(module, *args, cwd=inputs, timeout=60), "--seed: must be a non-negative integer")
+    assert _snapshot(inputs) == before
+
+
+def test_check_distinct_compares_files_not_spellings(tmp_path):
+    (tmp_path / "a.txt").write_text("a")
+    os.symlink(tmp_path / "a.txt", tmp_path / "s.txt")
+    _cli.check_distinct([(tmp_path / "new.txt", "--out"), (tmp_path / "b.txt", "--ply")], [(tmp_path / "a.txt", "x")])
+    for out, inp in [("s.txt", "a.txt"), ("a.txt", "s.txt"), ("sub/../a.txt", "a.txt")]:
+        (tmp_path / "sub").mkdir(exist_ok=True)
+        with pytest.raises(_cli.CommandError, match=f"^{tmp_path / out}: --out is the input"):
+            _cli.check_distinct([(tmp_path / out, "--out")], [(tmp_path / inp, "the input")])
+    with pytest.raises(_cli.CommandError, match="--b and --a name the same file"):
+        _cli.check_distinct([(tmp_path / "n.txt", "--a"), (tmp_path / "sub" / ".." / "n.txt", "--b")])
+
+
+# ------------------------------------------------------------------------------------------------- BAL values, cost
+@pytest.mark.parametrize("value", ["1e300", "inf", "nan", "-2e12"])
+def test_bundle_refuses_absurd_values_at_read_time(bal_problem, tmp_path, value):
+    lines = bal_problem.read_text().splitlines()
+    lines[3] = " ".join(lines[3].split()[:2] + [value, lines[3].split()[3]])     # the 3rd observation's x
+    bal_problem.write_text("\n".join(lines) + "\n")
+    one_line_error(run("bundle", bal_problem, "--out", tmp_path / "o.txt", timeout=60), "problem.txt", "line 4",
+                   repr(value))
+    assert not (tmp_path / "o.txt").exists()
+
+
+@pytest.mark.parametrize("solver", ["lm-schur", "scipy"])
+@pytest.mark.parametrize("depth", ["zero", "tiny"])
+def test_bundle_never_writes_a_solve_whose_cost_is_not_finite(bal_problem, tmp_path, depth, solver):
+    """A point at depth 0 in a camera projects to infinity; at the smallest depth above 0, with f, k1, k2 = 1e12
+    (values the reader accepts), its pixel is finite but its square overflows: either way an error on one line (no
+    RuntimeWarning), never a written 'solution'."""
+    from labutils.data.bal import read_bal
+
+    p = read_bal(bal_problem)
+    p.camera_params[0, :3] = 0.0                                          # camera 0: R = I exactly
+    j = p.point_indices[p.camera_indices == 0][0]
+    tz = p.camera_params[0, 5]
+    if depth == "zero":
+        p.points_3d[j] = [1.0, 1.0, -tz]                                  # depth exactly 0 in camera 0
+    else:
+        p.camera_params[0, 6:] = 1e12
+        p.points_3d[j] = [1e12, 1e12, np.nextafter(-tz, 0.0)]
+    write_bal(bal_problem, p)
+    proc = run("bundle", bal_problem, "--out", tmp_path / "o.txt", "--solver", solver, timeout=120)
+    one_line_error(proc, "problem.txt")
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["problem.txt"]
+
+
+# ------------------------------------------------------------------------------------------------- Ctrl-C
+def test_ctrl_c_while_the_command_loads_is_one_line_and_exit_130(tracks_and_K):
+    """Sent while numpy is being imported (its shared library appears in the process's memory map): no traceback."""
+    maps = Path("/proc/self/maps")
+    if not maps.exists():
+        pytest.skip("needs /proc to see when the command is importing numpy")
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-m", "labutils.sfm", "tracks.txt", "K.txt", "--out", "r.json"],
+                            cwd=tracks_and_K, env=env, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            if "numpy" in Path(f"/proc/{proc.pid}/maps").read_text():
+                break
+        except OSError:
+            pass
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert (proc.returncode, err) == (_cli.INTERRUPTED, "error: interrupted\n"), (proc.returncode, err)
+    assert sorted(p.name for p in tracks_and_K.iterdir()) == ["K.txt", "tracks.txt"]
+
+
+def test_ctrl_c_while_running_is_one_line_and_leaves_no_temporary_file(tmp_path, monkeypatch, capsys):
+    def interrupted(fd):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(os, "fsync", interrupted)
+
+    def main(argv):
+        _cli.write_all_atomically({tmp_path / "a.txt": "a", tmp_path / "b.txt": "b"})
+
+    assert _cli.run(main) == 130
+    assert capsys.readouterr().err == "error: interrupted\n" and list(tmp_path.iterdir()) == []
+
+
+def test_bench_keep_refuses_two_notebooks_of_one_name(tmp_path):
+    for d in ("n1", "n2", "keep"):
+        (tmp_path / d).mkdir()
+    for d in ("n1", "n2"):
+        (tmp_path / d / "x.ipynb").write_text("{}")
+    one_line_error(run("bench", "notebooks", "n1/x.ipynb", "n2/x.ipynb", "--keep", "keep", cwd=tmp_path, timeout=60),
+                   "keep/x.ipynb: --keep (for n2/x.ipynb) and --keep (for n1/x.ipynb) name the same file")
+    assert list((tmp_path / "keep").iterdir()) == []

@@ -1,10 +1,18 @@
 """Notebook 01's self-checks: the reference solutions pass every case, and typical mistakes get their own hint."""
+import re
+
 import numpy as np
 import pytest
 from _exercises import assert_passes, assert_stubs_not_written, hints
 
-from labutils.exercises.ex01_fundamental import check_eight_point, check_normalisation_matrix, check_sampson
+from labutils.exercises.ex01_fundamental import (
+    check_eight_point,
+    check_gold_standard_residuals,
+    check_normalisation_matrix,
+    check_sampson,
+)
 from labutils.twoview.epipolar import fundamental_8point, hartley_normalisation, sampson_distance
+from labutils.twoview.gold_standard import gold_standard_residuals
 
 # --- the reference solutions, as written in the notebook ---------------------------------------------------------
 
@@ -192,3 +200,80 @@ def test_eight_point_reduced_svd():
         U, s, Vt = np.linalg.svd(np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 3))
         return T2.T @ U @ np.diag([s[0], s[1], 0.0]) @ Vt @ T1
     assert "full_matrices=True" in hints(check_eight_point(wrong, verbose=False))
+
+
+# --- issue 19: the hints name the right mistake --------------------------------------------------------------------
+
+def _without_rank_2(x1, x2):
+    T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
+    y1, y2 = _h(x1) @ T1.T, _h(x2) @ T2.T
+    A = (y2[:, :, None] * y1[:, None, :]).reshape(-1, 9)
+    return T2.T @ np.linalg.svd(A)[2][-1].reshape(3, 3) @ T1
+
+
+def test_rank_3_hint_shows_the_size_of_the_third_singular_value():
+    hint = hints(check_eight_point(_without_rank_2, verbose=False))
+    third = re.search(r"singular values 1\.0e\+00, \d\.\de-\d\d, (\d\.\de-\d\d)", hint)
+    assert third and float(third.group(1)) > 0, hint                  # not printed as 0.0
+
+
+def test_exactly_eight_points_without_normalisation_names_the_normalisation():
+    report = check_eight_point(lambda x1, x2: eight_point_reference(x1, x2, normalise=lambda x: np.eye(3)),
+                               verbose=False)
+    minimal = next(c for c in report.cases if "exactly eight" in c.name)
+    assert not minimal.passed and minimal.hint.startswith("you skipped the normalisation"), minimal.hint
+
+
+def test_a_self_check_names_the_students_unwritten_helper(capsys):
+    def normalisation_matrix(x):
+        raise NotImplementedError("write the body of normalisation_matrix(x) here")
+
+    def eight_point(x1, x2):
+        T1 = normalisation_matrix(x1)
+        return T1
+
+    report = check_eight_point(eight_point)
+    out = capsys.readouterr().out
+    assert not report.written and report.helper == "normalisation_matrix"
+    assert "your eight_point calls normalisation_matrix, which is not written yet" in out, out
+
+
+def gold_reference(P2, points, x1, x2):
+    X = np.column_stack([points[:, 0], points[:, 1], np.ones(len(points)), points[:, 2]])
+    y = X @ P2.T
+    return np.hstack([points[:, :2] - x1, y[:, :2] / y[:, 2:] - x2]).ravel()
+
+
+def test_gold_standard_residuals_reference_and_stub(capsys):
+    assert_passes(check_gold_standard_residuals, gold_reference, min_cases=4)
+    assert_passes(check_gold_standard_residuals, gold_standard_residuals, min_cases=4)
+    assert_stubs_not_written(capsys, check_gold_standard_residuals)
+
+
+def _gs_wrong(kind):
+    def f(P2, points, x1, x2):
+        n = len(points)
+        X = np.column_stack([points[:, 0], points[:, 1], np.ones(n), points[:, 2]])
+        if kind == "rho third":
+            X = np.column_stack([points[:, 0], points[:, 1], points[:, 2], np.ones(n)])
+        y = X @ P2.T
+        x2_hat = y[:, :2] if kind == "no division" else y[:, :2] / y[:, 2:]
+        r1, r2 = points[:, :2] - x1, x2_hat - x2
+        if kind == "grouped":
+            return np.hstack([r1.ravel(), r2.ravel()])
+        if kind == "cost":
+            return (r1 ** 2).sum(1) + (r2 ** 2).sum(1)
+        r = np.hstack([r1, r2]).ravel()
+        return -r if kind == "sign" else r
+    return f
+
+
+@pytest.mark.parametrize("kind, words", [
+    ("grouped", "point by point"),
+    ("sign", "predicted minus measured"),
+    ("rho third", "ρ is the 4th coordinate"),
+    ("no division", "divided by its third coordinate"),
+    ("cost", "not the cost"),
+])
+def test_gold_standard_residuals_mistakes(kind, words):
+    assert words in hints(check_gold_standard_residuals(_gs_wrong(kind), verbose=False))

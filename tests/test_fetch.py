@@ -26,7 +26,7 @@ import pytest
 
 from labutils.data import fetch as F
 from labutils.data import registry as D
-from labutils.data.paths import data_dirs
+from labutils.data.paths import COURSE_ONLY, data_dirs
 
 NAMES = ["dino", "fountain-P11", "templeRing", "chessboard", "bal"]
 PROJECT = Path(__file__).resolve().parents[1]
@@ -154,7 +154,7 @@ def fetched(server, tmp_path_factory):
     data = tmp_path_factory.mktemp("data")
     names = ["all"] if set(AVAILABLE) == set(NAMES) else [n for n in NAMES if n in AVAILABLE]
     t0 = time.perf_counter()
-    proc = run_cli("fetch", *names, data=data, url=server.url + "/good")
+    proc = run_cli("fetch", *names, "--force", data=data, url=server.url + "/good")   # the sets are on the data path
     print(f"\nfetch {' '.join(names)} over loopback: {time.perf_counter() - t0:.1f} s")
     return SimpleNamespace(proc=proc, data=data, names=[n for n in NAMES if n in AVAILABLE])
 
@@ -173,6 +173,7 @@ def test_registry_is_well_formed():
             assert s.kind in ("files", "bz2", "zip") and s.role in ("origin", "mirror"), s
             assert s.url.startswith("https://") and (s.kind != "zip" or s.member_prefix.endswith("/")), s
     assert not F.DATASETS["dino"].sources and "no public download" in F.DATASETS["dino"].note
+    assert COURSE_ONLY == tuple(n for n, ds in F.DATASETS.items() if not ds.sources)    # what paths.how_to_get says
     assert all(ds.sources for ds in F.DATASETS.values() if ds.name != "dino")
     assert sum(ds.n_bytes for ds in F.DATASETS.values()) == 72_857_186      # the sets total ~73 MB
 
@@ -244,7 +245,7 @@ def test_a_corrupt_download_is_reported_by_name_and_removed(server, tmp_path):
     folder = tmp_path / "chessboard"
     folder.mkdir()
     (folder / "left01.jpg").write_bytes(b"an old, broken copy")      # must not survive either
-    proc = run_cli("fetch", "chessboard", data=tmp_path, url=server.url + "/bad")
+    proc = run_cli("fetch", "chessboard", "--force", data=tmp_path, url=server.url + "/bad")
     assert proc.returncode == 2
     (line,) = error_lines(proc)
     assert line.startswith(f"error: {folder / 'left01.jpg'}: sha256 mismatch"), line
@@ -258,7 +259,46 @@ def test_an_unreachable_server_is_one_error_and_leaves_nothing(tmp_path):
         F.fetch("bal", tmp_path, base_url=closed_port_url(), progress=False)
     assert exc.value.path == tmp_path / "bal" / "problem-49-7776-pre.txt"
     assert "download from http://127.0.0.1:" in str(exc.value) and "\n" not in str(exc.value)
-    assert files_under(tmp_path) == []
+    assert str(exc.value).endswith(": 127.0.0.1 refused the connection") and not exc.value.unresolved
+    assert list(tmp_path.iterdir()) == []                   # not even the empty folder bal/
+
+
+def test_offline_one_line_per_set_says_offline_and_leaves_no_folder(tmp_path):
+    """No host resolves (``.invalid`` never does): every set fails with the reason in a phrase and "offline?",
+    exit status 2, and not even an empty folder stays behind."""
+    proc = run_cli("fetch", "bal", "fountain-P11", "--force", data=tmp_path, url="http://nonexistent.invalid/")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stdout == ""
+    lines = [line for line in error_lines(proc) if line.startswith("error: ")]
+    assert [Path(line.split(": ")[1]).relative_to(tmp_path).parts[0] for line in lines] == ["bal", "fountain-P11"], \
+        proc.stderr
+    for line in lines:
+        assert line.endswith("failed: cannot resolve the host nonexistent.invalid (offline? no host name resolved)")
+    assert list(tmp_path.iterdir()) == []
+
+
+@needs("chessboard")
+def test_fetch_skips_a_set_present_and_verified_on_the_data_path(server, tmp_path, monkeypatch, capsys):
+    """Issue 20: sets already verified on the data path were downloaded again. Now they are reported present and
+    nothing is asked of the network; the others fail offline, one line per set, and leave no folder."""
+    data = tmp_path / "data"
+    shutil.copytree(AVAILABLE["chessboard"], data / "chessboard")
+    monkeypatch.setattr(F, "data_dirs", lambda: [data])      # the data path: this folder only
+    monkeypatch.setenv("LABUTILS_DATA", str(data))
+    monkeypatch.setenv(F.URL_ENV, "http://nonexistent.invalid/")
+    before = len(server.hits)
+    assert F.main(["fetch", "all"]) == 2
+    out, err = capsys.readouterr()
+    assert out == f"chessboard: present in {data / 'chessboard'} (sha256 verified); nothing downloaded\n"
+    failed = [line for line in err.splitlines() if line.startswith("error: ")]
+    assert [Path(line.split(": ")[1]).relative_to(data).parts[0] for line in failed] == \
+        ["dino", "fountain-P11", "templeRing", "bal"], err
+    assert all(line.endswith("(offline? no host name resolved)") for line in failed), err
+    assert sorted(os.listdir(data)) == ["chessboard"] and len(server.hits) == before
+
+    # run as a new user would, on the real data path: the set is found where it is, nothing is fetched
+    proc = run_cli("fetch", "chessboard", data=tmp_path / "data", url=closed_port_url())
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert proc.stdout.startswith("chessboard: present in ") and "sha256 verified" in proc.stdout
 
 
 @needs("templeRing", "bal")
@@ -302,6 +342,7 @@ def test_fetch_all_skips_the_set_without_a_public_download(server, tmp_path, mon
              for n in ("chessboard", "bal")}
     monkeypatch.setattr(D, "DATASETS", {"dino": F.DATASETS["dino"], **small})
     monkeypatch.setattr(F, "DATASETS", D.DATASETS)
+    monkeypatch.setattr(F, "data_dirs", lambda: [tmp_path])      # the data path: this folder only
     monkeypatch.setenv("LABUTILS_DATA", str(tmp_path))
     monkeypatch.delenv(F.URL_ENV, raising=False)
     assert F.main(["fetch", "all"]) == 0
@@ -365,3 +406,19 @@ def test_data_entry_point_has_no_runpy_warning(tmp_path):
     proc = run_cli("fetch", "dinosaur", data=tmp_path)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
 
+
+
+def test_a_ctrl_c_mid_fetch_leaves_no_folder(tmp_path, monkeypatch):
+    """The folders a fetch made are removed when it stops, by a failure or by Ctrl-C (``KeyboardInterrupt``, which
+    the command line reports on one line with exit status 130)."""
+    def interrupted(src, folder, todo, bar):
+        (folder / "gt_dense_cameras").mkdir(parents=True)
+        raise KeyboardInterrupt
+    monkeypatch.setitem(F._FETCHERS, "files", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        F.fetch("fountain-P11", tmp_path, base_url="http://nonexistent.invalid/", progress=False)
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "fountain-P11").mkdir()                  # a folder that was there before stays
+    with pytest.raises(KeyboardInterrupt):
+        F.fetch("fountain-P11", tmp_path, base_url="http://nonexistent.invalid/", progress=False)
+    assert [p.name for p in tmp_path.rglob("*")] == ["fountain-P11"]

@@ -72,3 +72,14 @@ def test_show_mesh_checks_the_mesh(static):
     with pytest.raises(ValueError, match="faces hold vertex indices"):
         show_reconstruction(V, mesh=(V, [[0, 1, 4]]), static=static)
     plt.close("all")
+
+
+def test_interactive_views_carry_their_title_as_plotly_draws_it():
+    """plotly.js 7 draws only ``layout.title.text``: a bare string title (kept as is by ``_validate=False``) is
+    silently dropped in the browser."""
+    X = np.random.default_rng(0).normal(size=(20, 3))
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    mesh = show_mesh(V, np.array([[0, 1, 2]]), title="the dinosaur")
+    for fig in (show_reconstruction(X, title="the dinosaur"), mesh):
+        assert fig.to_dict()["layout"]["title"] == {"text": "the dinosaur"}
+    assert not show_reconstruction(X).to_dict()["layout"].get("title")

@@ -323,6 +323,14 @@ def _guarded(source, name):
     return all(id(n) in ok_nodes for n in reads)
 
 
+def _picked(source):
+    """The names a cell binds to ``yours.pick(...)``: the student's function, or the library's while it is a stub
+    (:mod:`labutils.exercises.yours`), so later cells may read them."""
+    return {t.id for node in ast.walk(ast.parse(_python(source))) if isinstance(node, ast.Assign)
+            and isinstance(node.value, ast.Call) and ast.unparse(node.value.func).split(".")[-1] == "pick"
+            for t in node.targets if isinstance(t, ast.Name)}
+
+
 def stub_dependencies(instructor, student, name="notebook"):
     """Problems that could make a cell other than an exercise's own fail, or compute something else, in the
     student edition (see the module docstring); empty when there are none."""
@@ -338,7 +346,9 @@ def stub_dependencies(instructor, student, name="notebook"):
         changed = {ex.solution: read_i}
         if ex.check is not None:
             read_c, bound_c = _names(student.cells[ex.check].source)
-            differ |= bound_c
+            picked = _picked(student.cells[ex.check].source)
+            differ = (differ | bound_c) - picked
+            stubs -= picked
             changed[ex.check] = read_c
         if ex.tests is not None:
             read_t, bound_t = _names(instructor.cells[ex.tests].source)
@@ -378,21 +388,23 @@ TESTS = {"grade": True, "grade_id": "f_tests", "locked": True, "points": 1, "sch
          "task": False}
 
 
-@pytest.mark.parametrize("later, problem", [
-    ("y = lib_f(2)", None),
-    ("try:\n    f(0)\n    g = f\nexcept NotImplementedError:\n    g = lib_f", None),
-    ("y = f(2)", "reads 'f'"),
-    ("y = helper", None),
-    ("y = inner", "reads 'inner'"),
-    ("y = _hidden + 1", "reads '_hidden'"),
-    ("assert report.passed", "reads 'report'"),
-    ("try:\n    g = f\nexcept NotImplementedError:\n    g = lib_f", "reads 'f'"),
+@pytest.mark.parametrize("later, problem, check", [
+    ("y = lib_f(2)", None, "report = check_f(f)"),
+    ("try:\n    f(0)\n    g = f\nexcept NotImplementedError:\n    g = lib_f", None, "report = check_f(f)"),
+    ("y = f(2)", "reads 'f'", "report = check_f(f)"),
+    ("y = helper", None, "report = check_f(f)"),
+    ("y = inner", "reads 'inner'", "report = check_f(f)"),
+    ("y = _hidden + 1", "reads '_hidden'", "report = check_f(f)"),
+    ("assert report.passed", "reads 'report'", "report = check_f(f)"),
+    ("try:\n    g = f\nexcept NotImplementedError:\n    g = lib_f", "reads 'f'", "report = check_f(f)"),
+    ("y = f(2)", None, "report = check_f(f)\nf = yours.pick(f)"),             # the self-check cell picked f
+    ("y = f(2) + report.passed", "reads 'report'", "report = check_f(f)\nf = yours.pick(f)"),
 ])
-def test_stub_dependencies_finds_what_would_fail(later, problem):
+def test_stub_dependencies_finds_what_would_fail(later, problem, check):
     nb = _toy(("import numpy as np\nrng = np.random.default_rng(0)", None),
               ("helper = 1\ndef f(x):\n    ### BEGIN SOLUTION\n    return x\n    ### END SOLUTION\n"
                "### BEGIN SOLUTION\ninner = 2\n### END SOLUTION", SOL),
-              ("report = check_f(f)", None),
+              (check, None),
               ("### BEGIN HIDDEN TESTS\n_hidden = f(1)\nassert _hidden == 1\n### END HIDDEN TESTS", TESTS),
               (later, None))
     student = nbformat.reads(student_edition(nb), as_version=4)
@@ -536,7 +548,9 @@ def test_one_student_notebook_end_to_end(edition):
     NotebookClient(nb, km=km, timeout=300, resources={"metadata": {"path": str(out)}}).execute()
     print(f"{name} (student edition) ran end to end in {time.perf_counter() - tic:.1f} s")
     printed = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
-    assert printed.count("not written yet") == len([e for e in EXERCISES if e.notebook == name])
+    checks = [line for line in printed.splitlines() if line.startswith("self-check ·")]
+    assert len(checks) == len([e for e in EXERCISES if e.notebook == name]), checks
+    assert all("not written yet" in line for line in checks), checks
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -426,20 +426,27 @@ def main(argv=None):
     """``python -m labutils.bundle PROBLEM.txt --solver {lm-schur,scipy} --out SOLVED.txt [--fix-intrinsics] [--json]``.
 
     Reads a BAL file, solves it, writes the solution in BAL format (atomically, mode 0644) and prints a
-    summary (JSON with ``--json``). Any failure — a malformed file (naming the line), an unwritable output
-    (checked before the solve), a bad problem — is one line ``error: ...`` on stderr, exit status 2, and
-    nothing is written.
+    summary (JSON with ``--json``). Any failure — a malformed file (naming the line), an unwritable output or
+    one that is the problem file (checked before the solve), a bad problem, a solve whose cost is not finite — is
+    one line ``error: ...`` on stderr, exit status 2, and nothing is written.
     """
     args = _parser().parse_args(argv)
+    _cli.check_distinct([(args.out, "--out")], [(args.problem, "the input PROBLEM file")])
     out = _cli.check_output_path(args.out)
     problem = read_bal(args.problem)
     try:
-        with contextlib.redirect_stdout(sys.stderr):        # scipy's verbose output goes to stdout: keep it clean
+        # scipy's verbose output goes to stdout: keep it clean; an overflow is not a warning here but the error below
+        with contextlib.redirect_stdout(sys.stderr), np.errstate(over="ignore", invalid="ignore"):
             solved, res = solve_bal(problem, solver=args.solver, fix_intrinsics=args.fix_intrinsics, loss=args.loss,
                                     f_scale=args.f_scale, gauge=None if args.gauge == "none" else args.gauge,
                                     max_iter=args.max_iter, tol=args.tol, verbose=args.verbose)
     except ValueError as exc:
         raise _cli.CommandError(f"{args.problem}: {exc}") from None
+    if not (np.isfinite(res.cost_initial) and np.isfinite(res.cost_final) and np.isfinite(solved.camera_params).all()
+            and np.isfinite(solved.points_3d).all()):
+        raise _cli.CommandError(f"{args.problem}: the solve failed: cost {res.cost_initial:.6g} -> "
+                                f"{res.cost_final:.6g} is not finite (values too large for the model?); nothing "
+                                "written")
     _cli.write_atomically(out, format_bal(solved))
     summary = dict(problem=str(args.problem), out=str(args.out), n_cameras=problem.n_cameras,
                    n_points=problem.n_points, **res.summary())

@@ -2,6 +2,7 @@
 :mod:`labutils.calibrate.cli`."""
 import sys
 
+from ..core import cli as _cli
 from .cli import main
 
-sys.exit(main())
+sys.exit(_cli.run(main))

@@ -143,13 +143,9 @@ def undistorted_path(photo, out_dir):
 
 
 def check_no_input_overwritten(outputs, inputs):
-    """Raise CommandError when an output path (``{path: what}``) is one of the input images: it would replace it."""
-    resolved = {Path(f).resolve(): f for f in inputs}
-    for path, what in outputs.items():
-        hit = resolved.get(Path(path).resolve())
-        if hit is not None:
-            raise _cli.CommandError(f"{hit}: {what} would overwrite this input photo; choose another "
-                                    f"{'folder' if what == '--undistort-out' else 'file'}")
+    """Raise CommandError when an output (``[(path, what), ...]``) is one of the input photos or another output
+    (:func:`labutils.core.cli.check_distinct`): it would replace it."""
+    _cli.check_distinct(outputs, [(f, "an input photo") for f in inputs])
 
 
 def undistorted_images(files, K, dist, size, out_dir, quiet=False):
@@ -213,16 +209,14 @@ def main(argv=None):
     try:
         for path, what in [(args.out, "--out")] + ([(args.k_out, "--k-out")] if args.k_out else []):
             _cli.check_output_path(path, what)
-        if args.k_out and Path(args.k_out).resolve() == Path(args.out).resolve():
-            raise _cli.CommandError(f"{args.k_out}: --out and --k-out name the same file")
         if bool(args.undistort) != bool(args.undistort_out):
             raise _cli.CommandError("--undistort and --undistort-out go together: the photos and the folder for them")
         if args.undistort_out and not Path(args.undistort_out).is_dir():
             raise _cli.CommandError(f"{args.undistort_out}: the folder does not exist (--undistort-out)")
         files = _expand(args.images)
         photos = _expand(args.undistort) if args.undistort else []
-        planned = {args.out: "--out", **({args.k_out: "--k-out"} if args.k_out else {}),
-                   **{undistorted_path(f, args.undistort_out): "--undistort-out" for f in photos}}
+        planned = [(args.out, "--out"), (args.k_out, "--k-out")] + [
+            (undistorted_path(f, args.undistort_out), f"--undistort-out (for {f})") for f in photos]
         check_no_input_overwritten(planned, files + photos)
         names, corners, size, rejected = detect_all(files, args.board, args.quiet)
         pattern = " ".join(args.images)
@@ -274,4 +268,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -82,8 +82,8 @@ def parse_bal(text, where="<string>"):
     ------
     BALFormatError
         (a ``ValueError``) for a missing or bad header, a truncated file, a line with the wrong number
-        of fields, a non-numeric or non-finite value, an index out of range, or data after the end;
-        the message names the line.
+        of fields, a non-numeric or non-finite value or one larger than :data:`MAX_ABS` (1e12) in magnitude, an
+        index out of range, or data after the end; the message names the line.
 
     Examples
     --------
@@ -175,15 +175,21 @@ def _is_int(tok):
         return False
 
 
+MAX_ABS = 1e12      # no BAL value (pixel, rotation, translation, focal length, distortion, coordinate) is larger
+
+
 def _to_float(tokens, where, line_of, what):
-    """Convert a list of strings to floats; on failure name the line (``line_of(index)``) of the first bad one."""
+    """Convert a list of strings to floats; on failure name the line (``line_of(index)``) of the first bad one:
+    not a number, not finite, or larger in magnitude than :data:`MAX_ABS` (its square would overflow the cost)."""
     try:
         out = np.array(list(map(float, tokens)))
-        bad = np.flatnonzero(~np.isfinite(out))
+        bad = np.flatnonzero(~(np.abs(out) <= MAX_ABS))
         j = int(bad[0]) if bad.size else None
     except ValueError:
         j = next(j for j, t in enumerate(tokens) if not _is_float(t))
     if j is not None:
+        if _is_float(tokens[j]):
+            raise _err(where, line_of(j), f"{what} must be at most {MAX_ABS:g} in magnitude; got {tokens[j]!r}")
         raise _err(where, line_of(j), f"{what} must be finite numbers; got {tokens[j]!r}")
     return out
 

@@ -4,7 +4,11 @@
 file's sha256, unpacks what the origin packs (the BAL problem comes as ``.bz2``, the Middlebury temple as a
 ``.zip``) and lays the set out as ``<data>/<name>/<path>``, where ``<data>`` is ``$LABUTILS_DATA`` when set and the
 project's ``data/`` folder otherwise: the first places :func:`labutils.data.find_data` searches. A file that
-fails its check is never kept.
+fails its check is never kept, nor a folder made for a set that fails.
+
+``python -m labutils.data fetch`` skips a set already present and verified anywhere on the data path (the course's
+shared copy, say) and ends with one line per set: present, fetched, skipped, or failed and why ("offline?" when no
+host name resolved).
 
 ``$LABUTILS_DATA_URL``: when set, every file is fetched from ``<base>/<name>/<path>`` instead of its origin, for
 example from a course server holding the same layout, or (in the tests) a local copy served over HTTP.
@@ -12,14 +16,17 @@ example from a course server holding the same layout, or (in the tests) a local 
 import argparse
 import os
 import shutil
+import socket
 import sys
 import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import pooch
 
+from ..core import cli as _cli
 from .paths import PROJECT_ROOT, data_dirs
 from .registry import DATASETS, FetchError, Source, dataset, file_ok, status
 
@@ -88,8 +95,8 @@ def fetch(name: str, target=None, *, base_url: str = None, progress: bool = True
     Files already there with the right sha256 are kept and not downloaded again; a file with the wrong size or
     sha256 is replaced. A download is written to a temporary file next to its destination and moved into place
     only once its sha256 matches: a partial or corrupt download never stays behind, nor does a corrupt old copy
-    when no source can replace it. Sources are tried in order (origin, then mirror); the first failure of a
-    source ends its turn and the next takes the remaining files.
+    when no source can replace it, nor a folder this call made and left empty. Sources are tried in order (origin,
+    then mirror); the first failure of a source ends its turn and the next takes the remaining files.
 
     Parameters
     ----------
@@ -109,8 +116,10 @@ def fetch(name: str, target=None, *, base_url: str = None, progress: bool = True
     Raises
     ------
     FetchError
-        One line naming the file: no source known, a download failed, a checksum did not match, the disk is
-        full, the target folder is missing or not writable. ``KeyError`` for an unknown name.
+        One line naming the file: no source known, a download failed (the reason in a phrase: the host did not
+        resolve, refused, timed out, answered an HTTP error), a checksum did not match, the disk is full, the target
+        folder is missing or not writable. Its ``unresolved`` is True when every source failed because no host name
+        resolved. ``KeyError`` for an unknown name.
     """
     ds = dataset(name)
     folder = check_target(default_target() if target is None else target) / ds.name
@@ -120,8 +129,10 @@ def fetch(name: str, target=None, *, base_url: str = None, progress: bool = True
         raise FetchError(folder / todo[0].path, ds.note)
     for f in todo:                                  # a copy that fails its check is never kept
         _remove(folder / f.path)
+    made = sorted({d for f in todo for d in (folder / f.path).parents if (d == folder or folder in d.parents)
+                   and not d.exists()}, key=lambda d: -len(d.parts))
     bar = _Progress(ds.name, todo, enabled=progress)
-    notes, failure, n_done = [], None, 0
+    notes, failures, n_done = [], [], 0
     logger, level = pooch.get_logger(), pooch.get_logger().level
     logger.setLevel("WARNING")                      # pooch logs every file at INFO; the progress line says enough
     try:
@@ -132,16 +143,23 @@ def fetch(name: str, target=None, *, base_url: str = None, progress: bool = True
                 n_done += _FETCHERS[src.kind](src, folder, todo, bar)
                 todo = []
             except FetchError as exc:
-                failure = exc
+                failures.append(exc)
                 n_done += sum(1 for f in todo if (folder / f.path).is_file())
                 todo = [f for f in todo if not (folder / f.path).is_file()]
                 if todo and src is not sources[-1]:
-                    notes.append(f"{ds.name}: the {src.role} failed ({exc}); trying the next source")
+                    notes.append(f"{ds.name}: the {src.role} failed ({exc.message}); trying the next source")
                     bar.note(notes[-1])
     finally:
         logger.setLevel(level)
         bar.close()
+        for d in made:                              # the folders this call made and left empty: none stays behind
+            try:
+                d.rmdir()
+            except OSError:
+                pass
     if todo:
+        failure = failures[-1]
+        failure.unresolved = all(e.unresolved for e in failures)
         raise failure
     return FetchReport(ds.name, folder, n_done, notes)
 
@@ -159,12 +177,48 @@ def _remove(path):
         pass
 
 
-def _why(exc, url):
-    """One line for a failed download."""
-    text = " ".join(str(exc).split())
-    if "does not match the known hash" in text:
-        return f"sha256 mismatch: {url} did not serve the registered file (corrupt or changed); nothing was kept"
-    return f"download from {url} failed: {text[:300]}"
+def _chain(exc):
+    """``exc`` and the exceptions behind it (``__cause__``, ``__context__``, urllib3's ``reason``)."""
+    seen = []
+    while isinstance(exc, BaseException) and exc not in seen:
+        seen.append(exc)
+        exc = exc.__cause__ or exc.__context__ or getattr(exc, "reason", None)
+    return seen
+
+
+def _shorten(text, limit=160):
+    """``text`` on one line, cut at a word boundary with '...' if longer than ``limit``."""
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[:limit].rsplit(" ", 1)[0] + " ..."
+
+
+def _reason(exc, url):
+    """``(why, unresolved)`` for a failed download: a short phrase (not a library's raw text cut mid-word), and
+    whether the host's name did not resolve (no network, or no such host)."""
+    chain = _chain(exc)
+    names = {type(e).__name__ for e in chain}
+    host = urlsplit(url).hostname or url
+    response = getattr(exc, "response", None)
+    if getattr(response, "status_code", None) is not None:
+        return f"the server answered HTTP {response.status_code} {response.reason or ''}".rstrip(), False
+    if any(isinstance(e, socket.gaierror) for e in chain) or "NameResolutionError" in names:
+        return f"cannot resolve the host {host}", True
+    if any(isinstance(e, ConnectionRefusedError) for e in chain):
+        return f"{host} refused the connection", False
+    if any(isinstance(e, TimeoutError) for e in chain) or any("Timeout" in n for n in names):
+        return f"{host} did not answer within {TIMEOUT_S} s", False
+    if any(isinstance(e, ConnectionError) for e in chain) or "ConnectionError" in names:
+        return f"the connection to {host} failed", False
+    return f"{type(chain[-1]).__name__}: {_shorten(chain[-1])}", False
+
+
+def _failed(dest, exc, url):
+    """The :class:`FetchError` for a failed download of ``dest`` from ``url``: one line, the reason in a phrase."""
+    if "does not match the known hash" in str(exc):
+        return FetchError(dest, f"sha256 mismatch: {url} did not serve the registered file (corrupt or changed); "
+                                "nothing was kept")
+    why, unresolved = _reason(exc, url)
+    return FetchError(dest, f"download from {url} failed: {why}", unresolved=unresolved)
 
 
 def _downloader(bar, label):
@@ -183,7 +237,7 @@ def _fetch_files(src, folder, todo, bar):
             os.chmod(dest, mode)                    # pooch's temporary file was 0600
         except Exception as exc:                    # network, HTTP status, checksum (ValueError), disk (OSError)
             _remove(dest)
-            raise FetchError(dest, _why(exc, src.url_of(f.path))) from exc
+            raise _failed(dest, exc, src.url_of(f.path)) from exc
         bar.done_file(f)
     return len(todo)
 
@@ -202,7 +256,7 @@ def _fetch_bz2(src, folder, todo, bar):
                                      processor=pooch.Decompress(method="bzip2", name=name),
                                      downloader=_downloader(bar, f.path + ".bz2"))
             except Exception as exc:
-                raise FetchError(dest, _why(exc, src.url_of(f.path))) from exc
+                raise _failed(dest, exc, src.url_of(f.path)) from exc
             _place(out, dest, f, src.url_of(f.path), mode)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -222,7 +276,7 @@ def _fetch_zip(src, folder, todo, bar):
                            processor=pooch.Unzip(members=members, extract_dir="unzipped"),
                            downloader=_downloader(bar, src.url.rsplit("/", 1)[-1]))
         except Exception as exc:
-            raise FetchError(folder / todo[0].path, _why(exc, src.url)) from exc
+            raise _failed(folder / todo[0].path, exc, src.url) from exc
         for f, member in zip(todo, members):
             _place(Path(tmp) / "unzipped" / member, folder / f.path, f, src.url_of(f.path), mode)
             bar.done_file(f)
@@ -359,35 +413,76 @@ def _list(names, show_files):
     return 0
 
 
-def _fetch(names, explicit):
+def present_on_path(name, dirs=None):
+    """The folders the loaders would read a data set from, if every file of it is verified there, else None.
+
+    Each file is judged where :func:`labutils.data.find_data` would find it: in the first folder of the data path
+    that has it. The set is present when each such copy has its registered size and sha256.
+
+    Returns
+    -------
+    list of Path or None
+        The set's folders holding those copies (one, usually), in data-path order.
+    """
+    ds = dataset(name)
+    dirs = data_dirs() if dirs is None else dirs
+    used = []
+    for f in ds.files:
+        found = next((Path(d) / ds.name for d in dirs if (Path(d) / ds.name / f.path).exists()), None)
+        if found is None or not file_ok(found / f.path, f):
+            return None
+        used += [found] if found not in used else []
+    return used
+
+
+def _fetch(names, explicit, force=False):
+    """Fetch each set; then one line per set, in order: present, fetched (stdout), skipped (a note) or failed and
+    why (an ``error:`` line on stderr). Returns the exit status: 2 if any set failed."""
     try:
         target = check_target(default_target())
     except FetchError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    failed = 0
+    lines, failures, n_downloaded = [], [], 0
     for name in names:
+        ds = DATASETS[name]
+        where = None if force else present_on_path(name)
+        if where:
+            lines.append((sys.stdout, f"{name}: present in {', '.join(map(str, where))} (sha256 verified); "
+                                      "nothing downloaded"))
+            continue
         if not explicit and not sources_for(name):
-            print(f"note: {name}: skipped, {DATASETS[name].note}", file=sys.stderr)
+            lines.append((sys.stderr, f"note: {name}: skipped, {ds.note}"))
             continue
         try:
             rep = fetch(name, target)
         except FetchError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            failed += 1
+            failures.append(exc)
+            lines.append((sys.stderr, exc))
             continue
-        ds = DATASETS[name]
-        print(f"{name}: {_files(len(ds.files))}, {_mb(ds.n_bytes)}, sha256 verified, in {rep.folder} "
-              f"({rep.n_downloaded} downloaded)")
-    return 2 if failed else 0
+        n_downloaded += rep.n_downloaded
+        lines.append((sys.stdout, f"{name}: {_files(len(ds.files))}, {_mb(ds.n_bytes)}, sha256 verified, in "
+                                  f"{rep.folder} ({rep.n_downloaded} downloaded)"))
+    offline = bool(failures) and n_downloaded == 0 and all(e.unresolved for e in failures)
+    for stream, line in lines:
+        if isinstance(line, FetchError):
+            line = f"error: {line}" + (" (offline? no host name resolved)" if offline else "")
+        print(line, file=stream, flush=True)
+    return 2 if failures else 0
 
 
 def main(argv=None) -> int:
     """``python -m labutils.data list [NAME ...] [--files]`` and ``python -m labutils.data fetch NAME ...|all``.
 
-    Exit status 0 on success; 2 when an argument is wrong or a data set could not be laid out (one line per
-    failure on stderr, ``error: <file>: what went wrong``). ``fetch all`` skips, with a note, the sets that have
-    no public download unless ``$LABUTILS_DATA_URL`` is set; naming such a set is an error.
+    ``fetch`` skips a set already present and verified on the data path (:func:`present_on_path`), unless
+    ``--force``, and ends with one line per set: present, fetched (stdout), skipped (a note) or failed and why
+    (stderr, ``error: <file>: what went wrong``, with "offline?" when no host name resolved). A set that fails
+    leaves nothing behind: no partial file, no folder made for it. ``fetch all`` skips, with a note, the sets
+    that have no public download unless ``$LABUTILS_DATA_URL`` is set; naming such a set is an error.
+
+    Exit status 0 on success; 2 when an argument is wrong or a data set could not be laid out. A Ctrl-C raises
+    ``KeyboardInterrupt`` (no partial file and no folder made for the set is kept), which the command line,
+    :func:`labutils.core.cli.run`, reports on one line with exit status 130.
     """
     names = list(DATASETS)
     parser = _Parser(prog="python -m labutils.data",
@@ -399,8 +494,13 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True, metavar="{fetch,list}")
     p_fetch = sub.add_parser("fetch", help="download, verify and lay out data sets",
                              description="Download data sets, check every file's sha256, and lay them out on the "
-                                         "data path. Files already there and verified are not downloaded again.")
+                                         "data path. A set already present and verified on the data path is "
+                                         "skipped; files already in the target and verified are not downloaded "
+                                         "again. Ends with one line per set.")
     p_fetch.add_argument("names", nargs="+", metavar="NAME", help=f"data sets: {', '.join(names)}, or all")
+    p_fetch.add_argument("--force", action="store_true",
+                         help="fetch into the target folder even a set that is present elsewhere on the data path "
+                              "(files already verified in the target are still not downloaded again)")
     p_list = sub.add_parser("list", help="show each data set, its size, licence and whether it is present",
                             description="Show each data set, its size, licence and citation, its sources, and "
                                         "whether it is on the data path (every file's sha256 is checked).")
@@ -413,15 +513,11 @@ def main(argv=None) -> int:
         choices = ", ".join(names + (["all"] if args.command == "fetch" else []))
         print(f"error: unknown data set {unknown[0]!r}; choose from {choices}", file=sys.stderr)
         return 2
-    try:
-        if args.command == "list":
-            return _list(args.names or names, args.files)
-        explicit = "all" not in args.names
-        return _fetch(names if not explicit else list(dict.fromkeys(args.names)), explicit)
-    except KeyboardInterrupt:
-        print("error: interrupted (no partial file was kept)", file=sys.stderr)
-        return 130
+    if args.command == "list":
+        return _list(args.names or names, args.files)
+    explicit = "all" not in args.names
+    return _fetch(names if not explicit else list(dict.fromkeys(args.names)), explicit, args.force)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

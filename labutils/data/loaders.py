@@ -13,7 +13,7 @@ from ..core.scene import Scene, Views, nan_tracks
 from ..core.synthetic import make_scene
 from ..core.validation import as_rng
 from .middlebury import read_par
-from .paths import DataNotFoundError, find_data
+from .paths import DataNotFoundError, find_data, how_to_get
 
 DINO_HELP = """\
 The Oxford dinosaur is not on the data path. Put it at <data>/dino/:
@@ -83,8 +83,8 @@ def load_scene(*, rng, verbose=True, **synthetic_kwargs):
         scene = make_scene(rng=rng, **kwargs)
         if verbose:
             missing = str(exc).split(" is not on the data path")[0]
-            print(f"Real data not found: {missing} is not on the data path (`python -m labutils.data fetch dino` "
-                  "gets it). Using the SYNTHETIC fallback.")
+            print(f"Real data not found: {missing} is not on the data path. {how_to_get('dino')}. Using the "
+                  "SYNTHETIC fallback.")
     if verbose:
         print(scene.summary())
     return scene

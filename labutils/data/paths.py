@@ -7,12 +7,14 @@ The data path is searched in this order:
 3. ``../shared/data/`` beside the project's root.
 
 Real data is never committed. ``python -m labutils.data fetch NAME`` downloads a data set into the first of
-these folders (see :mod:`labutils.data.fetch`).
+these folders (see :mod:`labutils.data.fetch`); the dinosaur has no public download, so the course provides its
+copy (:func:`how_to_get` says so).
 """
 import os
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
+COURSE_ONLY = ("dino",)     # the sets with no public download (no sources in labutils.data.registry)
 
 
 class DataNotFoundError(FileNotFoundError):
@@ -58,9 +60,28 @@ def data_dirs():
     return [d for d, _ in candidate_dirs() if d is not None and d.is_dir()]
 
 
+def how_to_get(name):
+    """One sentence saying how to get data set ``name``: the command that fetches it, or, for a set with no public
+    download (the dinosaur) while ``$LABUTILS_DATA_URL`` is unset, where the course's copy comes from.
+
+    >>> how_to_get("bal")
+    'Fetch it with:  python -m labutils.data fetch bal'
+    >>> import os; old = os.environ.pop("LABUTILS_DATA_URL", None)
+    >>> how_to_get("dino").split(". ")[0]
+    'The dino set has no public download: your course provides its copy'
+    >>> _ = os.environ.update(LABUTILS_DATA_URL=old) if old is not None else None
+    """
+    if name in COURSE_ONLY and not os.environ.get("LABUTILS_DATA_URL", "").strip():
+        return (f"The {name} set has no public download: your course provides its copy. Copy the course's "
+                f"{name}/ folder into data/ (or use the course's shared ../shared/data/ beside the project), or "
+                f"fetch it from the course's server (LABUTILS_DATA_URL=<the course's address> python -m labutils.data "
+                f"fetch {name})")
+    return f"Fetch it with:  python -m labutils.data fetch {name}"
+
+
 def missing_message(relpath, help_text=None):
-    """The message of :class:`DataNotFoundError` for ``relpath``: each folder searched, in order, and the
-    command that fetches the data set (the first component of ``relpath``)."""
+    """The message of :class:`DataNotFoundError` for ``relpath``: each folder searched, in order, and how to get
+    the data set (the first component of ``relpath``; :func:`how_to_get`)."""
     name = Path(relpath).parts[0]
     lines = [f"{relpath} is not on the data path. Searched, in order:"]
     for d, origin in candidate_dirs():
@@ -68,8 +89,7 @@ def missing_message(relpath, help_text=None):
             lines.append(f"  - (nothing: {origin})")
         else:
             lines.append(f"  - {d}  ({origin}{'' if d.is_dir() else '; does not exist'})")
-    lines.append(f"Fetch it with:  python -m labutils.data fetch {name}   (python -m labutils.data list shows "
-                 "every data set)")
+    lines.append(how_to_get(name) + "   (python -m labutils.data list shows every data set)")
     if help_text:
         lines.append(help_text)
     return "\n".join(lines)

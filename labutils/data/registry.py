@@ -100,11 +100,14 @@ class DataSet:
 
 
 class FetchError(Exception):
-    """A data set could not be laid out; ``str()`` is one line naming the file: ``'<path>: <what went wrong>'``."""
+    """A data set could not be laid out; ``str()`` is one line naming the file: ``'<path>: <what went wrong>'``.
 
-    def __init__(self, path, message):
+    ``unresolved`` is True when the download failed because no host name resolved (offline, most likely).
+    """
+
+    def __init__(self, path, message, *, unresolved=False):
         super().__init__(f"{path}: {message}")
-        self.path, self.message = path, message
+        self.path, self.message, self.unresolved = path, message, unresolved
 
 
 def _parse(table):

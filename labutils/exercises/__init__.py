@@ -15,8 +15,14 @@ from its first commit):
 3. **An autograded test cell** (``grade: true``, ``locked: true``, with ``points``) whose only code is between
    ``### BEGIN HIDDEN TESTS`` and ``### END HIDDEN TESTS`` (plus a comment saying what is tested); hidden
    from the student edition, run by nbgrader's autograder and by nbval on the instructor notebooks.
-4. **The notebook goes on with the library's implementation** and says so in a sentence, so a student who
-   is stuck is never blocked.
+4. **The notebook goes on with the student's function** (issue 19): the self-check cell ends with
+   ``eight_point = yours.pick(eight_point)`` (:mod:`~labutils.exercises.yours`), which prints whose function the
+   later cells use — the student's, or the library's while it is a stub, so a student who is stuck is never
+   blocked — and the markdown after the tests says so in a sentence. Later notebooks read it with
+   ``yours.load("eight_point")``. The setup imports none of the references the exercises reproduce, and the hidden
+   tests run the function through ``yours.assert_own`` first (a body calling the library's version earns nothing);
+   a hidden test may import a reference under a private name (``from labutils.twoview import fundamental_8point
+   as _reference``).
 
 At least one written question per notebook is a markdown cell with ``solution: true, grade: true`` and
 ``points`` (manually graded), whose model answer sits between ``### BEGIN SOLUTION`` / ``### END SOLUTION``.
@@ -26,8 +32,10 @@ The runner the checks share is :mod:`~labutils.exercises.runner` (:func:`run_che
 live in a module of its own (``labutils.exercises.ex01_fundamental`` ...), so that a wrong answer can be tested against
 its hint by the unit tests, without running the notebook.
 """
+from . import yours
 from .ex01_fundamental import (
     check_eight_point,
+    check_gold_standard_residuals,
     check_normalisation_matrix,
     check_sampson,
 )
@@ -93,8 +101,9 @@ from .ex13_calibration import (
 )
 from .runner import CaseResult, CheckReport, run_checks
 
-__all__ = ["CaseResult", "CheckReport", "run_checks", "check_eight_point", "check_normalisation_matrix",
-           "check_sampson", "check_choose_pose", "check_four_poses", "check_triangulate_linear",
+__all__ = ["CaseResult", "CheckReport", "run_checks", "yours", "check_eight_point", "check_gold_standard_residuals",
+           "check_normalisation_matrix", "check_sampson", "check_choose_pose", "check_four_poses",
+           "check_triangulate_linear",
            "check_adaptive_ransac", "check_pose_from_depths", "p3p_ransac_inliers", "check_projection_jacobian",
            "check_schur_step", "check_sparsity_mask", "accept_points_reference", "check_accept_points",
            "check_choose_next_view", "next_view_reference", "check_cramer_rao_pose", "check_nees",

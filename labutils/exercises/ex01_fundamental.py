@@ -1,5 +1,5 @@
-"""Self-checks of notebook 01 (the fundamental matrix): Hartley's normalisation, the normalised 8-point algorithm
-and the Sampson distance.
+"""Self-checks of notebook 01 (the fundamental matrix): Hartley's normalisation, the normalised 8-point algorithm,
+the Sampson distance and the residual vector of the gold standard's cost.
 
 Each check runs a student's function on a few cases and prints pass or a hint naming the likely mistake, found by
 comparing the answer with the typical wrong variants (mean distance 1 instead of √2, F left in normalised
@@ -18,6 +18,7 @@ from ..twoview.epipolar import (
     transform_points,
 )
 from ..twoview.essential import fundamental_from_pose
+from ..twoview.gold_standard import fundamental_gold_standard, gold_standard_residuals
 from .runner import run_checks
 
 
@@ -173,6 +174,10 @@ def _eight_point_variants(x1, x2):
          "the denormalisation has T1 and T2 swapped: y2ᵀ F̂ y1 = x2ᵀ (T2ᵀ F̂ T1) x1, so F = T2ᵀ F̂ T1"),
         (inv2.T @ _rank2(F_hat) @ inv1,
          "you denormalised with T⁻¹: since y = T x, y2ᵀ F̂ y1 = x2ᵀ (T2ᵀ F̂ T1) x1 — use T itself, F = T2ᵀ F̂ T1"),
+        (_unnormalised_8point(x1, x2),
+         "you skipped the normalisation: move each image's points to centroid 0, mean distance √2 (T1, T2)"
+         + (" (with exactly eight points, enforcing rank 2 after denormalising gives this same F: the cases with "
+            "more points tell the two apart)" if len(x1) == 8 else "")),
         (_rank2(T2.T @ F_hat @ T1),
          "you enforced rank 2 after denormalising: set the smallest singular value of F̂ to zero in normalised "
          "coordinates, then denormalise (H&Z Alg. 11.1: the Frobenius norm is only meaningful there)"),
@@ -182,8 +187,6 @@ def _eight_point_variants(x1, x2):
         (T2.T @ _rank2(Vt[min(len(x1), 9) - 1].reshape(3, 3)) @ T1,
          "with exactly 8 points np.linalg.svd(A, full_matrices=False) returns only 8 rows of Vᵀ, and the null vector "
          "of A is the 9th: keep full_matrices=True (the default) so that Vᵀ is 9×9"),
-        (_unnormalised_8point(x1, x2),
-         "you skipped the normalisation: move each image's points to centroid 0, mean distance √2 (T1, T2)"),
     ] + [
         (_eight_point_T(x1, x2, v1[k][0], v2[k][0]),
          f"your F is the 8-point's with another normalisation of the points ({v1[k][1].split(':')[0]}): use "
@@ -203,8 +206,9 @@ def _diagnose(F, x1, x2):
     F = _as_F(F)
     s = np.linalg.svd(F, compute_uv=False)
     if s[2] > 1e-8 * s[0]:
-        return (f"your F has rank 3 (singular values {np.round(s / s[0], 6).tolist()} after scaling): enforce rank 2 "
-                "after the SVD — set the smallest singular value of F̂ to zero and rebuild it")
+        values = ", ".join(f"{v:.1e}" for v in s / s[0])
+        return (f"your F has rank 3 (singular values {values} after scaling to the largest): enforce rank 2 after "
+                "the SVD — set the smallest singular value of F̂ to zero and rebuild it")
     ref = fundamental_8point(x1, x2, degeneracy=None)
     if up_to_sign_scale(F, ref) < 1e-6:
         return None
@@ -359,4 +363,121 @@ def check_sampson(sampson, verbose=True):
         ("a noisy scene (σ = 1 px) and its 8-point F", noisy),
         ("F scaled by -1000: the same distances", scaled),
         ("noise-free correspondences and the true F: zero", exact),
+    ], verbose=verbose)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# exercise 4: the gold standard's cost (H&Z Alg. 11.3)
+# ---------------------------------------------------------------------------------------------------------------
+
+def _gs_variants(P2, q, x1, x2):
+    """Typical wrong residual vectors of the gold-standard cost, each with its hint."""
+    X = np.column_stack([q[:, 0], q[:, 1], np.ones(len(q)), q[:, 2]])
+    X_swapped = np.column_stack([q[:, 0], q[:, 1], q[:, 2], np.ones(len(q))])
+    y, y_sw = X @ P2.T, X_swapped @ P2.T
+    r1, r2 = q[:, :2] - x1, y[:, :2] / y[:, 2:] - x2
+    return [
+        (np.hstack([r1.ravel(), r2.ravel()]),
+         "the residuals are grouped by image (all of view 1, then all of view 2): give them point by point, the four "
+         "of point 0 (x̂1 - x1, x̂2 - x2), then point 1, ... — np.hstack([r1, r2]).ravel() — the LM's sparse "
+         "Jacobian has one row block per point"),
+        (-np.hstack([r1, r2]).ravel(),
+         "the sign is reversed: the residual is predicted minus measured, x̂ - x (the cost is the same, but the "
+         "Jacobian the LM uses is that of x̂ - x, so with -r its steps go uphill)"),
+        (np.hstack([r2, r1]).ravel(),
+         "view 2 comes first in your residuals: per point (x̂1 - x1, x̂2 - x2), view 1 first"),
+        (np.hstack([r1, y_sw[:, :2] / y_sw[:, 2:] - x2]).ravel(),
+         "point i is X_i = (u_i, v_i, 1, ρ_i): ρ is the 4th coordinate (it multiplies e', the last column of P2), "
+         "the 3rd is 1"),
+        (np.hstack([r1, y[:, :2] - x2]).ravel(),
+         "x̂2 is P2 X divided by its third coordinate: y = P2 X, x̂2 = y[:2] / y[2]"),
+        (np.hstack([r1, (X @ P2.T)[:, :2] / (X @ P2.T)[:, 2:] - x1]).ravel(),
+         "the view-2 residual compares x̂2 with x2, the measured points of view 2 (not x1)"),
+    ]
+
+
+def _diagnose_gs(r, P2, q, x1, x2):
+    n = len(q)
+    r = np.asarray(r, float)
+    if r.ndim == 0 or r.shape == (n,):
+        return ("return the residual vector, 4 numbers per point, not the cost: Levenberg–Marquardt needs each "
+                "residual (and its derivatives), the cost Σ r² is its own business")
+    if r.shape == (n, 4):
+        return "return a flat vector of shape (4N,): r.ravel() of the (N, 4) per-point residuals"
+    if r.shape == (2 * n,):
+        return ("only one image's residuals: the cost counts both views, (x̂1 - x1, x̂2 - x2) per point — 4N numbers "
+                "(in view 1, x̂1 = (u, v) since P1 X = (u, v, 1))")
+    if r.shape != (4 * n,):
+        return f"gold_standard_residuals must return shape ({4 * n},), 4 per point; it returned {r.shape}"
+    if not np.all(np.isfinite(r)):
+        return "gold_standard_residuals returned NaN or inf"
+    ref = gold_standard_residuals(P2, q, x1, x2)
+    if np.abs(r - ref).max() < 1e-9 * max(1.0, np.abs(ref).max()):
+        return None
+    for wrong, hint in _gs_variants(P2, q, x1, x2):
+        if np.abs(r - wrong).max() < 1e-9 * max(1.0, np.abs(wrong).max()):
+            return hint
+    return (f"the residuals differ from the cost's by up to {np.abs(r - ref).max():.3g}: per point "
+            "(u - x1, v - y1, x̂2 - x2, ŷ2 - y2) with (x̂2, ŷ2) = (P2 X)[:2] / (P2 X)[2], X = (u, v, 1, ρ)")
+
+
+def _gs_random(seed, n):
+    rng = np.random.default_rng(seed)
+    P2 = rng.normal(size=(3, 4))
+    P2[2] = [0.1, -0.2, 1.0, 0.3]                          # keeps the third coordinate away from 0
+    q = np.column_stack([rng.uniform(-1, 1, size=(n, 2)), rng.uniform(-0.5, 0.5, size=n)])
+    X = np.column_stack([q[:, 0], q[:, 1], np.ones(n), q[:, 2]]) @ P2.T
+    x1, x2 = q[:, :2] + rng.normal(scale=0.05, size=(n, 2)), X[:, :2] / X[:, 2:] + rng.normal(scale=0.05, size=(n, 2))
+    return P2, q, x1, x2
+
+
+def check_gold_standard_residuals(gold_standard_residuals, verbose=True):
+    """Self-check of ``gold_standard_residuals(P2, points, x1, x2) -> r`` (the cost of H&Z Alg. 11.3).
+
+    Cases: one point worked by hand, measurements that are exactly the projections (r = 0), random cameras, points
+    and noisy measurements (the residual vector, point by point), and the LM of :func:`fundamental_gold_standard`
+    driven by the student's residuals on a noisy scene (the gold standard's F).
+
+    Examples
+    --------
+    >>> check_gold_standard_residuals(gold_standard_residuals, verbose=False).passed
+    True
+    """
+    def by_hand(f):
+        P2 = np.hstack([np.eye(3), [[1.0], [0.0], [0.0]]])
+        q, x1, x2 = np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 2)), np.zeros((1, 2))
+        r = np.asarray(f(P2, q, x1, x2), float)
+        if r.shape == (4,) and np.allclose(r, [0, 0, 1, 0], atol=1e-12):
+            return None
+        return (_diagnose_gs(r, P2, q, x1, x2)
+                or f"X = (0, 0, 1, 1), P2 X = (1, 0, 1): x̂2 = (1, 0), so r = (0, 0, 1, 0); you gave {r.round(6)}")
+
+    def exact(f):
+        P2, q, _, _ = _gs_random(7, 12)
+        X = np.column_stack([q[:, 0], q[:, 1], np.ones(len(q)), q[:, 2]]) @ P2.T
+        x1, x2 = q[:, :2].copy(), X[:, :2] / X[:, 2:]
+        r = np.asarray(f(P2.copy(), q.copy(), x1, x2.copy()), float)
+        if r.shape == (4 * len(q),) and np.abs(r).max() < 1e-12:
+            return None
+        return _diagnose_gs(r, P2, q, x1, x2) or "the measurements are the projections: every residual must be 0"
+
+    def noisy(f):
+        P2, q, x1, x2 = _gs_random(8, 15)
+        return _diagnose_gs(f(P2.copy(), q.copy(), x1.copy(), x2.copy()), P2, q, x1, x2)
+
+    def driven(f):
+        x1, x2 = _pair(9, 1.0, n=20)
+        F0 = fundamental_8point(x1, x2, degeneracy=None)
+        ref = fundamental_gold_standard(x1, x2, F0=F0, n_starts=0)
+        ours = fundamental_gold_standard(x1, x2, F0=F0, n_starts=0, residuals=f)
+        if up_to_sign_scale(ours.F, ref.F) < 1e-6:
+            return None
+        return (f"Levenberg–Marquardt driven by your residuals ends {up_to_sign_scale(ours.F, ref.F):.2g} away from "
+                f"the gold standard's F (residual {ours.residual:.4f} px against {ref.residual:.4f} px)")
+
+    return run_checks("gold_standard_residuals", gold_standard_residuals, [
+        ("one point by hand: P2 = [I | (1, 0, 0)], X = (0, 0, 1, 1), x1 = x2 = 0: r = (0, 0, 1, 0)", by_hand),
+        ("measurements equal to the projections: r = 0", exact),
+        ("a random P2, 15 points, noisy measurements: the residual vector, point by point", noisy),
+        ("the LM on a noisy scene (σ = 1 px), driven by your residuals: the gold standard's F", driven),
     ], verbose=verbose)

@@ -391,9 +391,13 @@ Without the data every notebook still runs: it says so and uses a synthetic scen
 2. **Run the self-check below it.** It tries your function on a few cases and prints `pass`, or a hint that names
    the likely mistake. Until you have written the function it says "not written yet".
 3. **The autograded test cell** after it looks empty (a comment): its tests are hidden and run when your work is
-   graded: the self-check's cases, and more.
-4. **The notebook goes on** with the library's version of the function, so you are never stuck: the rest of the
-   notebook runs whether or not your function is done.
+   graded: the self-check's cases, and more. They also check that your function computes its answer itself: a
+   body that calls the library's version of the same thing (`return fundamental_8point(x1, x2)`) gets no points.
+4. **The notebook goes on with your function.** After the self-check one line says whose function the later cells
+   use: `eight_point: yours`, or, while you have not written it, `not written yet: the library's ... stands in` —
+   so you are never stuck. Later notebooks read your functions from the earlier notebooks *as you last saved them*
+   in the same folder (`eight_point: yours, from 01_fundamental_matrix.ipynb`): keep the notebooks together and
+   save after you change an exercise.
 
 **Written questions** are cells that say `YOUR ANSWER HERE`: replace that text by your answer (Markdown and
 equations are fine).

@@ -2,6 +2,8 @@
 for each (:func:`run_checks`)."""
 from dataclasses import dataclass, field
 
+from .yours import _unwritten_in
+
 
 @dataclass
 class CaseResult:
@@ -17,12 +19,14 @@ class CheckReport:
     """What :func:`run_checks` found: one :class:`CaseResult` per case.
 
     ``passed`` is True only when every case passed; ``written`` is False while the function is still the
-    student edition's stub (it raised ``NotImplementedError``).
+    student edition's stub (it raised ``NotImplementedError``), or while it calls a helper of the student's that is
+    (``helper`` names it then).
     """
 
     exercise: str
     cases: list = field(default_factory=list)
     written: bool = True
+    helper: str = ""
 
     @property
     def passed(self):
@@ -35,6 +39,10 @@ class CheckReport:
 
     def text(self):
         """The report as printed: a heading, then one line per case."""
+        if not self.written and self.helper:
+            return (f"self-check · {self.exercise}: your {self.exercise} calls {self.helper}, which is not written "
+                    f"yet — write {self.helper} (its exercise is above), run its cell, then this one. Meanwhile the "
+                    "notebook goes on with the library's version.")
         if not self.written:
             return (f"self-check · {self.exercise}: not written yet — write the function's body (see its "
                     "docstring), run its cell, then this one. Meanwhile the notebook goes on with the library's "
@@ -60,7 +68,8 @@ def run_checks(exercise, func, cases, *, verbose=True):
         ``(description, case)``; ``case(func)`` returns None when the function passes, else a hint: a sentence
         naming the likely mistake ("your F has rank 3: enforce rank 2 after the SVD"). An exception raised by
         ``func`` inside a case becomes that case's hint (with its type and message); ``NotImplementedError``
-        means the stub is not written yet, and no further case is run.
+        means the stub is not written yet, and no further case is run (when it comes from another function that
+        ``func`` calls, a helper of the student's still a stub, the report names that helper).
     verbose : bool
         Print the report (:meth:`CheckReport.text`).
 
@@ -86,8 +95,11 @@ def run_checks(exercise, func, cases, *, verbose=True):
     for name, case in cases:
         try:
             hint = case(func)
-        except NotImplementedError:
+        except NotImplementedError as exc:
             report.written = False
+            helper = _unwritten_in(exc.__traceback__)
+            if helper not in (exercise, getattr(func, "__name__", exercise), "<lambda>"):
+                report.helper = helper
             break
         except Exception as exc:       # the student's code raised: that is the hint
             hint = f"raised {type(exc).__name__}: {exc}"

@@ -7,7 +7,7 @@ original images, ready for ``python -m labutils.sfm TRACKS.txt K.txt --out RESUL
 
 The work is :mod:`labutils.match`; this module only reads, reports and writes. Progress (a bar per
 stage) goes to stderr; every failure is one line on stderr, ``error: <file>[, line N]: what is wrong``,
-with exit status 2, and nothing is written.
+with exit status 2, and nothing is written; an ``--out`` that is K or one of the images is refused before any work.
 """
 import argparse
 import sys
@@ -36,6 +36,8 @@ def run(args: argparse.Namespace, log: Callable[[str], None]) -> int:
     folder = Path(args.image_dir)
     if not folder.is_dir():
         raise _cli.CommandError(f"{folder}: not a folder")
+    _cli.check_distinct([(args.out, "--out")], [(args.K, "the input K file")]
+                        + [(p, "an input image") for p in image_files(folder)])
     if args.max_size is not None and args.max_size < 16:
         raise _cli.CommandError(f"--max-size must be at least 16 pixels; got {args.max_size}")
     if args.window is not None and args.window < 1:
@@ -113,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
                                                      "-1 -1 where unseen, in the pixels of the original images")
     parser.add_argument("--max-size", type=int, default=None,
                         help="reduce each image so that its longer side is at most this many pixels (default: none)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
+    parser.add_argument("--seed", type=_cli.seed_arg, default=0,
+                        help="seed of the random generator, a non-negative integer (default 0)")
     parser.add_argument("--pairs", choices=("auto", "all", "sequence", "ring"), default="auto",
                         help="which pairs to match (default auto: all for up to 20 images, else sequence)")
     parser.add_argument("--window", type=int, default=None,

@@ -9,9 +9,10 @@ object with exact truth), :mod:`~labutils.model.carving` (silhouettes, voxel car
 check, depth maps and their fusion).
 """
 from .carving import (
-    THRESHOLD_CANDIDATES,
+    MIN_AGREEMENT,
     BackgroundModel,
     Carving,
+    Silhouettes,
     VoxelGrid,
     background_model,
     bounding_box_from_silhouettes,
@@ -24,10 +25,12 @@ from .carving import (
     mesh_volume,
     project_with_depth,
     render_silhouette,
+    segment_views,
     signed_distance_map,
     silhouette,
     silhouette_ious,
     surface_mesh,
+    threshold_ladder,
 )
 from .meshing import DelaunayMesh, boundary_faces, delaunay_mesh, face_normals, vertex_normals
 from .pointcloud import (
@@ -77,7 +80,8 @@ from .texturing import (
     vertex_views,
 )
 
-__all__ = ["THRESHOLD_CANDIDATES", "BackgroundModel", "Carving", "VoxelGrid", "background_model",
+__all__ = ["MIN_AGREEMENT", "Silhouettes", "segment_views", "threshold_ladder", "BackgroundModel", "Carving",
+           "VoxelGrid", "background_model",
            "bounding_box_from_silhouettes", "carve", "choose_threshold", "clean_mask", "colour_distance",
            "inside_silhouette", "make_snowman", "mask_iou", "mesh_volume", "project_with_depth", "render_silhouette",
            "signed_distance_map", "silhouette", "silhouette_ious", "surface_mesh", "DelaunayMesh", "boundary_faces",

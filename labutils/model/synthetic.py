@@ -282,12 +282,31 @@ def _gradient(top, bottom_gain=0.4):
     return lambda y: np.asarray(top, float) * (0.8 + bottom_gain * y)[:, None]
 
 
+def _two_tones(upper, lower, horizon=0.55, bottom_gain=0.4):
+    """A wall (``upper``) above a table (``lower``) meeting at ``horizon`` (a fraction of the height), both with the
+    gradient of :func:`_gradient`; one tone when they are equal."""
+    upper, lower = np.asarray(upper, float), np.asarray(lower, float)
+    return lambda y: np.where((y < horizon)[:, None], upper, lower) * (0.8 + bottom_gain * y)[:, None]
+
+
+def _as_rgb(value, name, rows):
+    """An RGB colour (3,), or ``rows`` of them, each channel in [0, 255], as a (rows, 3) float array."""
+    a = np.asarray(value, dtype=float)
+    a = a[None] if a.shape == (3,) else a
+    if a.ndim != 2 or a.shape[1] != 3 or len(a) not in rows or not np.all(np.isfinite(a)) or a.min() < 0 \
+            or a.max() > 255:
+        raise ValueError(f"{name} must be an RGB colour (3,){' or (2, 3): two tones' if 2 in rows else ''}, "
+                         f"channels in [0, 255]; got {np.asarray(value).tolist()!r}")
+    return a
+
+
 _LIGHT = np.array([0.4, -0.3, 0.85]) / np.linalg.norm([0.4, -0.3, 0.85])
 
 
 def make_snowman(n_views: int = 24, *, rng: np.random.Generator, image_size: tuple[int, int] = (320, 240),
                  f: float = 420.0, distance: float = 3.0, elevations: Sequence[float] = (15.0, 45.0),
-                 noise: float = 2.0, spheres: ArrayLike | None = None) -> SphereScene:
+                 noise: float = 2.0, spheres: ArrayLike | None = None, colour: ArrayLike = (235.0, 130.0, 40.0),
+                 background: ArrayLike = (60.0, 75.0, 170.0)) -> SphereScene:
     """Cameras on rings around a plain orange snowman of spheres on a blue gradient (carving's test object).
 
     Parameters
@@ -305,6 +324,11 @@ def make_snowman(n_views: int = 24, *, rng: np.random.Generator, image_size: tup
         Standard deviation of the pixel noise, grey levels.
     spheres : (M, 4) array_like, optional
         Centre and radius of each sphere (default: :data:`SNOWMAN`).
+    colour : (3,) array_like
+        The object's paint, RGB in [0, 255] (lit fully; the shade goes down to 0.35 of it on the dark side).
+    background : (3,) or (2, 3) array_like
+        RGB of the background, or two tones: a wall (upper 55 % of the image) and a table; each darkens upwards
+        (0.8 of it at the top, 1.2 at the bottom, clipped at 255).
 
     Returns
     -------
@@ -315,11 +339,17 @@ def make_snowman(n_views: int = 24, *, rng: np.random.Generator, image_size: tup
     >>> s = make_snowman(6, rng=np.random.default_rng(0), image_size=(64, 48), f=84.0)
     >>> s.P.shape, s.images[0].shape, s.images[0].dtype, bool(s.masks[0].any())
     ((6, 3, 4), (48, 64, 3), dtype('uint8'), True)
+    >>> grey = make_snowman(2, rng=np.random.default_rng(0), image_size=(64, 48), f=84.0, colour=(200, 200, 200),
+    ...                     background=[(10, 10, 10), (90, 90, 90)], noise=0)   # grey on a black wall, grey table
+    >>> grey.images[0][0, 0].tolist(), grey.images[0][-1, 0].tolist()
+    ([8, 8, 8], [107, 107, 107])
     """
     n_views, size, noise, spheres, K = _check(n_views, rng, image_size, f, noise, spheres, SNOWMAN)
+    paint = _as_rgb(colour, "colour", (1,))[0]
+    tones = _as_rgb(background, "background", (1, 2))
     R, t = _ring(n_views, np.array([0.0, 0.0, 0.3]), as_positive(distance, "distance"), elevations)
-    return _render(spheres, K, R, t, size, lambda X, k: np.array([235.0, 130.0, 40.0]),
-                   _gradient([60.0, 75.0, 170.0]), _LIGHT, 0.35, noise, rng, "snowman")
+    return _render(spheres, K, R, t, size, lambda X, k: paint, _two_tones(tones[0], tones[-1]), _LIGHT, 0.35, noise,
+                   rng, "snowman")
 
 
 def _stripes(X, k):

@@ -55,6 +55,7 @@ from .views import (
     plot_errors_per_view,
     plot_pyramid,
     plot_registration_order,
+    plot_self_calibration,
     plot_view_graph,
 )
 
@@ -65,4 +66,6 @@ __all__ = ["camera_frusta", "few_ticks", "image_frame", "plot_cameras", "plot_ca
            "plot_distortion_field", "plot_line_fits", "plot_rectified_pair", "plot_reprojection_errors",
            "plot_view_influence", "plot_mask", "plot_mesh", "plot_silhouette_agreement", "plot_match_lines",
            "plot_track_lengths", "side_by_side", "plot_check_outcome", "plot_disparity", "plot_score_curve",
-           "plot_error_growth", "plot_errors_per_view", "plot_pyramid", "plot_registration_order", "plot_view_graph"]
+           "plot_error_growth", "plot_errors_per_view", "plot_pyramid", "plot_registration_order",
+           "plot_self_calibration",
+           "plot_view_graph"]

@@ -431,9 +431,15 @@ def show_reconstruction(X=None, colors=None, R=None, t=None, K=None, image_size=
         traces.append(_mesh_trace(*mesh))
     fig = go.Figure(traces, _validate=False)
     fig.update_layout(scene=dict(aspectmode="data", xaxis_title="x", yaxis_title="y", zaxis_title="z"),
-                      margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=title, showlegend=False,
+                      margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=_title(title), showlegend=False,
                       height=520)
     return fig
+
+
+def _title(title):
+    """A plotly title as ``{"text": ...}``: figures built with ``_validate=False`` keep a bare string, which plotly.js
+    (7) no longer draws."""
+    return None if title is None else dict(text=str(title))
 
 
 def _rgb_strings(cols):
@@ -466,8 +472,8 @@ def show_mesh(vertices, faces, colors=None, *, static=False, title=None):
     import plotly.graph_objects as go
 
     fig = go.Figure([_mesh_trace(vertices, faces, colors)], _validate=False)
-    fig.update_layout(scene=dict(aspectmode="data"), margin=dict(l=0, r=0, t=30 if title else 0, b=0), title=title,
-                      height=520)
+    fig.update_layout(scene=dict(aspectmode="data"), margin=dict(l=0, r=0, t=30 if title else 0, b=0),
+                      title=_title(title), height=520)
     return fig
 
 

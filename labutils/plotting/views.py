@@ -80,3 +80,22 @@ def plot_errors_per_view(ax, errors, ylabel="rotation error (°)", markers="o.sd
     ax.set_ylabel(ylabel)
     ax.legend(fontsize=8)
     return ax
+
+
+def plot_self_calibration(ax, curve, f=None, f_true=None):
+    """The self-calibration's criterion against the focal length (log x), with the estimate and, if known, the truth.
+
+    ``curve`` is ``(n, 2)``: ``(f, median asymmetry of E = Kᵀ F K)`` (``PhotoReconstruction.self_calibration``).
+    """
+    c = np.asarray(curve, float)
+    if c.ndim != 2 or c.shape[1] != 2 or len(c) < 2:
+        raise ValueError(f"curve must have shape (n, 2) with n >= 2; got shape {c.shape}")
+    ax.semilogx(c[:, 0], c[:, 1], "k-", lw=1)
+    if f is not None:
+        ax.axvline(f, color="C0", label=f"estimate {f:.0f} px")
+    if f_true is not None:
+        ax.axvline(f_true, color="C3", ls="--", label=f"given K {f_true:.0f} px")
+    ax.set(xlabel="focal length f (px)", ylabel="median (σ1 − σ2) / (σ1 + σ2) of E")
+    if f is not None or f_true is not None:
+        ax.legend()
+    return ax

@@ -479,7 +479,8 @@ def _parser():
                                                         "the PLY points get their colours from them")
     parser.add_argument("--ply-format", choices=["binary", "ascii"], default="binary",
                         help="PLY encoding (default binary little-endian)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random generator (default 0)")
+    parser.add_argument("--seed", type=_cli.seed_arg, default=0,
+                        help="seed of the random generator, a non-negative integer (default 0)")
     parser.add_argument("--threshold", type=float, default=4.0, help="pixel threshold (default 4)")
     parser.add_argument("--quiet", action="store_true", help="no progress log, only the summary line")
     parser.add_argument("--global", dest="global_sfm", action="store_true",
@@ -519,10 +520,16 @@ def main(argv=None):
     see each point: :func:`labutils.model.cloud_from_reconstruction`) and, with ``--images``, their colours.
 
     The progress log goes to stderr, the summary to stdout. Exit status 0 on success; 2 for a bad input file or
-    argument, an output that cannot be written (checked before the reconstruction), or a reconstruction that
-    fails — one line on stderr, and nothing is written.
+    argument, an output that cannot be written or that is an input or the other output (checked before the
+    reconstruction), or a reconstruction that fails — one line on stderr, and nothing is written.
     """
     args = _parser().parse_args(argv)
+    images_in = []
+    if args.images and Path(args.images).is_dir():
+        images_in = [(p, "an input image (--images)") for p in sorted(Path(args.images).iterdir())
+                     if p.suffix.lower() in IMAGE_SUFFIXES]
+    _cli.check_distinct([(args.out, "--out"), (args.ply, "--ply")],
+                        [(args.tracks, "the input TRACKS file"), (args.K, "the input K file")] + images_in)
     tracks = read_tracks(args.tracks)
     K = read_calibration(args.K, tracks.shape[0])
     outs = [_cli.check_output_path(args.out)] + ([_cli.check_output_path(args.ply)] if args.ply else [])

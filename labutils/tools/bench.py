@@ -371,6 +371,8 @@ def main(argv=None):
                 raise _cli.CommandError(f"{args.keep}: no such folder (--keep)")
             if any(args.keep.resolve() == p.resolve().parent for p in paths):
                 raise _cli.CommandError(f"{args.keep}: --keep must not be the notebooks' own folder")
+            _cli.check_distinct([(args.keep / p.name, f"--keep (for {p})") for p in paths],
+                                [(p, "a notebook to run") for p in paths])
         rows = time_notebooks(paths, keep=args.keep)
         print(json.dumps(dict(machine=machine, notebooks=rows,
                               total_seconds=round(sum(r["seconds"] for r in rows), 1)), indent=1))

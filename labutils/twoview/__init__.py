@@ -20,6 +20,7 @@ from .epipolar import (
 )
 from .essential import (
     check_parallax,
+    cheirality_choice,
     cheirality_counts,
     decompose_essential,
     essential_from_fundamental,
@@ -27,7 +28,7 @@ from .essential import (
     pose_from_essential,
     pure_rotation,
 )
-from .gold_standard import GoldStandardProblem, GoldStandardResult, fundamental_gold_standard
+from .gold_standard import GoldStandardProblem, GoldStandardResult, fundamental_gold_standard, gold_standard_residuals
 from .triangulation import (
     fundamental_residual,
     ray_angles_deg,
@@ -38,8 +39,9 @@ from .triangulation import (
 )
 
 __all__ = ["ModelSelection", "design_matrix", "fundamental_7point", "fundamental_8point", "fundamental_ransac",
-           "gric_model_selection", "hartley_normalisation", "homography_dlt", "sampson_distance", "cheirality_counts",
-           "decompose_essential", "essential_from_fundamental", "fundamental_from_pose", "pose_from_essential",
-           "pure_rotation", "check_parallax", "GoldStandardProblem", "GoldStandardResult", "fundamental_gold_standard",
-           "fundamental_residual", "ray_angles_deg", "triangulate", "triangulate_multiview", "triangulate_optimal",
-           "triangulate_tracks"]
+           "gric_model_selection", "hartley_normalisation", "homography_dlt", "sampson_distance",
+           "cheirality_choice", "cheirality_counts", "decompose_essential", "essential_from_fundamental",
+           "fundamental_from_pose", "pose_from_essential", "GoldStandardProblem", "GoldStandardResult",
+           "fundamental_gold_standard", "gold_standard_residuals", "fundamental_residual", "ray_angles_deg",
+           "triangulate", "triangulate_multiview", "triangulate_optimal", "triangulate_tracks", "pure_rotation",
+           "check_parallax"]

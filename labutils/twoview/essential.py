@@ -120,6 +120,45 @@ def _cheirality_counts(poses, y1, y2):
     return counts
 
 
+def cheirality_choice(poses: list, y1: ArrayLike, y2: ArrayLike) -> tuple:
+    """The candidate pose that puts the most points in front of both cameras (H&Z Sec. 9.6.3).
+
+    The step of :func:`pose_from_essential` after :func:`decompose_essential`, on normalised points: each
+    candidate triangulates the points (DLT with ``P1 = [I | 0]``, ``P2 = [R | t]``) and counts those with positive
+    depth in camera 1 (``X_z``) and in camera 2 (``(R X + t)_z``); the first candidate with the most wins.
+
+    Parameters
+    ----------
+    poses : list of (R (3, 3), t (3,))
+        Candidate poses of camera 2, camera 1 being ``[I | 0]``.
+    y1, y2 : (N, 2) array_like
+        Corresponding normalised image points ``K⁻¹ x``.
+
+    Returns
+    -------
+    (R, t)
+        One of ``poses``, unchanged.
+
+    Examples
+    --------
+    >>> from labutils.core.synthetic import make_scene
+    >>> from labutils.core.geometry import relative_pose, skew
+    >>> s = make_scene(20, 2, noise_px=0.0, rng=np.random.default_rng(0))
+    >>> x1, x2, _ = s.pair(0, 1, which="true")
+    >>> Kinv = np.linalg.inv(s.K)
+    >>> R_true, t_true = relative_pose(s.R[0], s.t[0], s.R[1], s.t[1])
+    >>> R, t = cheirality_choice(decompose_essential(skew(t_true) @ R_true), transform_points(Kinv, x1),
+    ...                          transform_points(Kinv, x2))
+    >>> bool(np.allclose(R, R_true))
+    True
+    """
+    y1, y2 = check_pair(y1, y2, 1)
+    poses = list(poses)
+    if not poses:
+        raise ValueError("poses must hold at least one (R, t) candidate, got none")
+    return poses[int(np.argmax(_cheirality_counts(poses, y1, y2)))]
+
+
 def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> list:
     """How many correspondences each of the four poses of E puts in front of both cameras (H&Z Sec. 9.6.3).
 

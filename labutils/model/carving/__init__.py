@@ -6,10 +6,14 @@ the dinosaur is Fitzgibbon, Cross & Zisserman's turntable sequence, SMILE 1998; 
 shape by space carving", IJCV 2000, add photo-consistency) keeps a voxel when its centre projects inside every
 silhouette. Here:
 
-1. **Silhouettes from colour** (:func:`background_model`, :func:`colour_distance`, :func:`silhouette`): the
-   background's colours are learnt from a thin frame at the image borders (the object does not touch it), as a set
-   of cells in CIELAB with the lightness scaled down (shadows change lightness more than hue); a pixel belongs to
-   the object when its colour is far from every background colour; small specks are removed and small holes filled.
+1. **Silhouettes from colour** (:func:`background_model`, :func:`colour_distance`, :func:`silhouette`,
+   :func:`segment_views`): the background's colours are learnt from a thin frame at the image borders (the object
+   does not touch it) as a few clusters in plain CIELAB (lightness counts like hue: a grey object on black is as
+   visible as an orange one on blue; a background of two tones gets two clusters); a pixel belongs to the object
+   when its Mahalanobis distance to every cluster exceeds a threshold taken from the data: the border's own
+   distances give the lowest, and the views' agreement once carved picks among the candidates above it
+   (:func:`choose_threshold`); small specks are removed and small holes filled. Views whose mask the carved model
+   explains poorly are reported unsure (:func:`unsure_warning`).
 2. **A voxel grid** (:class:`VoxelGrid`) over a box: given, or found from the silhouettes alone by carving coarse
    grids around the point the silhouettes' central rays meet (:func:`bounding_box_from_silhouettes`).
 3. **Carving** (:func:`inside_silhouette` for one view, :func:`carve` for all): vectorised over voxels, one pass
@@ -24,7 +28,17 @@ Pixels: ``(x, y)`` with x right, y down; pixel ``mask[r, c]`` is centred on ``(c
 ``(x, y)`` falls in ``mask[floor(y + 0.5), floor(x + 0.5)]``. Cameras: ``P = K [R | t]`` (any scale or sign of P
 is accepted: depth is taken as in H&Z Sec. 6.2.3).
 """
+from .consensus import (
+    MIN_AGREEMENT,
+    Silhouettes,
+    choose_threshold,
+    segment_views,
+    threshold_ladder,
+    unsure_views,
+    unsure_warning,
+)
 from .silhouettes import (
+    QUANTISATION,
     BackgroundModel,
     background_model,
     clean_mask,
@@ -33,17 +47,11 @@ from .silhouettes import (
     signed_distance_map,
     silhouette,
 )
-from .surface import (
-    THRESHOLD_CANDIDATES,
-    choose_threshold,
-    mesh_volume,
-    render_silhouette,
-    silhouette_ious,
-    surface_mesh,
-)
+from .surface import mesh_volume, render_silhouette, silhouette_ious, surface_mesh
 from .voxels import Carving, VoxelGrid, bounding_box_from_silhouettes, carve, inside_silhouette, project_with_depth
 
 __all__ = ["BackgroundModel", "background_model", "colour_distance", "silhouette", "clean_mask", "signed_distance_map",
            "mask_iou", "VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve",
            "bounding_box_from_silhouettes", "surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious",
-           "THRESHOLD_CANDIDATES", "choose_threshold"]
+           "QUANTISATION", "threshold_ladder", "choose_threshold", "Silhouettes", "segment_views", "MIN_AGREEMENT",
+           "unsure_views", "unsure_warning"]

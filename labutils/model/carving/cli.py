@@ -4,8 +4,11 @@ Reads a Middlebury camera file (the images beside it), learns the background's c
 makes one silhouette per image, finds the object's box, carves the visual hull on a voxel grid, and writes its
 surface (marching cubes) as a binary PLY mesh; with ``--masks DIR`` also the silhouettes as PNGs
 (``<image>_mask.png``). Progress goes to stderr. Every failure is one line on stderr,
-``error: <file>[, line N]: what is wrong``, with exit status 2, and nothing is written. A model whose silhouettes
-match the masks poorly (median IoU < 0.5) is still written (exit 0), with one ``carve: warning: ...`` line on stderr.
+``error: <file>[, line N]: what is wrong``, with exit status 2, and nothing is written; an output that is the
+camera file, an image or another output is refused before any work. A model whose silhouettes match the masks
+poorly (median IoU < 0.5) is still written (exit 0), with one ``carve: warning: ...`` line on stderr; so is one
+whose silhouettes match some views' masks less well than IoU 0.9: one ``carve: warning: unsure silhouettes in ...``
+line naming them.
 
 The estimators live in :mod:`labutils.model.carving`; this module is the thin command line around them.
 """
@@ -22,16 +25,16 @@ from ...core import cli as _cli
 from ...data.middlebury import read_par
 from ...data.ply import write_mesh
 from . import (
-    THRESHOLD_CANDIDATES,
     VoxelGrid,
     background_model,
     bounding_box_from_silhouettes,
     carve,
-    choose_threshold,
     clean_mask,
     colour_distance,
+    segment_views,
     silhouette_ious,
     surface_mesh,
+    unsure_warning,
 )
 
 DEFAULT_GRID = 128
@@ -75,6 +78,7 @@ def run(args):
         raise _cli.CommandError(f"{par}: is a folder; give the camera file (e.g. {par / (par.name + '_par.txt')})")
     if not par.is_file():
         raise _cli.CommandError(f"{par}: no such file")
+    _cli.check_distinct([(out, "--out")], [(par, "the input PAR_FILE")])
     _cli.check_output_path(out, "--out")
     out_dir = out.parent if str(out.parent) else Path(".")
     masks_dir = Path(args.masks) if args.masks else None
@@ -95,6 +99,10 @@ def run(args):
             raise _cli.CommandError(f"--threshold must be a number >= 0 or 'auto'; got {args.threshold!r}")
 
     views = read_par(par)
+    masks_out = [(masks_dir / f"{Path(p).stem}_mask.png", "a --masks file") for p in views.image_paths] \
+        if masks_dir is not None else []
+    _cli.check_distinct([(out, "--out")] + masks_out,
+                        [(par, "the input PAR_FILE")] + [(p, "an input image") for p in views.image_paths])
     _log(args.quiet, f"carve: {views.n_views} cameras from {par}; reading the images")
     images = _read_images(views)
     for i, img in enumerate(images):
@@ -115,21 +123,28 @@ def run(args):
         print(f"carve: warning: the model's silhouettes hardly match the masks (median IoU {median:.3f} < "
               f"{MIN_MEDIAN_IOU}): object and background colours too close, or wrong cameras; look at --masks",
               file=sys.stderr, flush=True)
+    else:
+        unsure = unsure_warning(ious, [Path(p).name for p in views.image_paths])
+        if unsure:                          # some views' masks and the others contradict each other
+            print(f"carve: warning: {unsure}; look at --masks", file=sys.stderr, flush=True)
     return 0
 
 
 def _compute(args, views, images, par):
     P = views.P
     t0 = time.perf_counter()
-    model = background_model(images)
-    distances = [colour_distance(img, model) for img in images]
     threshold = args.threshold
     if threshold is None:
-        threshold, scores = choose_threshold(distances, P, every=3)
-        table = ", ".join(f"{c:g}: {s:.3f}" for c, s in zip(THRESHOLD_CANDIDATES, scores[:, 0]))
-        _log(args.quiet, f"carve: colour threshold {threshold:g} (silhouette agreement, median IoU on a coarse "
-                         f"grid: {table}) [{time.perf_counter() - t0:.1f} s]")
-    masks = [clean_mask(d > threshold) for d in distances]
+        seg = segment_views(images, P, every=3, check=False)     # the finer model below is checked
+        table = ", ".join(f"{c:.3g}: {med:.3f}/{lo:.3f}"
+                          for c, (med, lo) in zip(seg.candidates, seg.scores) if med >= 0)
+        threshold, masks = seg.threshold, seg.masks
+        _log(args.quiet, f"carve: background of {seg.model.n_clusters} colour clusters from the image borders; "
+                         f"colour threshold {threshold:.3g} (silhouette agreement on a coarse grid, median/min IoU: "
+                         f"{table}) [{time.perf_counter() - t0:.1f} s]")
+    else:
+        model = background_model(images)
+        masks = [clean_mask(colour_distance(img, model) > threshold) for img in images]
     empty = [str(views.image_paths[i]) for i, m in enumerate(masks) if not m.any()]
     if empty:
         raise _cli.CommandError(f"{empty[0]}: the silhouette is empty (no pixel differs from the background's "
@@ -165,7 +180,7 @@ def _write(args, out, out_dir, masks_dir, views, masks, vertices, faces, normals
         temps.append((tmp, out))
         write_mesh(tmp, vertices, faces, normals=normals, format="ascii" if args.ascii else "binary_little_endian",
                    comments=[f"visual hull of {par.name} by labutils.carve: grid {grid.shape}, voxel "
-                             f"{grid.voxel_size:.6g}, colour threshold {threshold:g}"])
+                             f"{grid.voxel_size:.6g}, colour threshold {threshold:.6g}"])
         if masks_dir is not None:
             for path, m in zip(views.image_paths, masks):
                 name = f"{Path(path).stem}_mask.png"
@@ -201,8 +216,9 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"voxels along the longest side of the object's box (default {DEFAULT_GRID})")
     parser.add_argument("--masks", metavar="DIR", help="also write the silhouettes as DIR/<image>_mask.png")
     parser.add_argument("--threshold", default="auto",
-                        help="colour distance (CIELAB units) above which a pixel is the object, or 'auto' to pick "
-                             "the one whose silhouettes agree best (default auto)")
+                        help="colour distance (Mahalanobis, in CIELAB, to the nearest of the background's colour "
+                             "clusters) above which a pixel is the object, or 'auto' to pick the one whose "
+                             "silhouettes agree best (default auto)")
     parser.add_argument("--ascii", action="store_true", help="write an ASCII PLY instead of binary")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = parser.parse_args(argv)

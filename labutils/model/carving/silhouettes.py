@@ -6,10 +6,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import ndimage
 
-__all__ = ["BackgroundModel", "background_model", "colour_distance", "clean_mask", "silhouette",
-           "signed_distance_map", "mask_iou"]
+__all__ = ["QUANTISATION", "BackgroundModel", "background_model", "colour_distance", "clean_mask",
+           "silhouette", "signed_distance_map", "mask_iou"]
 
 
 def _as_number(value, name, *, lo=None, hi=None, integer=False, open_lo=False):
@@ -45,63 +44,124 @@ def _as_mask(mask, name="mask", shape=None):
     return a.astype(bool)
 
 
-def _lab_cells(image, lightness_weight):
-    """Each pixel's cell of the (w·L, a, b) colour grid, as a flat index into a ``(nL, 256, 256)`` array.
-
-    OpenCV's 8-bit CIELAB stores ``L·255/100`` and ``a + 128``, ``b + 128``, already on a 1-unit grid for a and b;
-    the lightness cell is ``floor(w · L)``.
-    """
-    lab = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2LAB)
-    L = np.floor(lab[..., 0] * (lightness_weight * 100.0 / 255.0) + 1e-9).astype(np.int32)   # exact products: not 15.99
-    return (L << 16) | (lab[..., 1].astype(np.int32) << 8) | lab[..., 2].astype(np.int32)
+QUANTISATION = 0.5
+"""Standard deviation (CIELAB units) added to every background cluster's spread on each axis: about the step of one
+grey level of an 8-bit image in CIELAB, so a perfectly flat synthetic background still has a spread."""
 
 
-def _n_lightness_cells(lightness_weight):
-    return int(np.floor(100 * lightness_weight)) + 1
+def _lab(pixels):
+    """CIELAB of uint8 RGB pixels (..., 3) as float32: L in [0, 100], a and b about [-128, 127] (plain, unweighted)."""
+    a = np.ascontiguousarray(pixels, dtype=np.uint8)
+    flat = a.reshape(1, -1, 3).astype(np.float32) / 255.0
+    return cv2.cvtColor(flat, cv2.COLOR_RGB2LAB).reshape(a.shape)
 
 
 @dataclass
 class BackgroundModel:
-    """The colours of the background, learnt from the image borders.
+    """The colours of the background, learnt from the image borders: a few clusters in plain CIELAB.
+
+    A pixel's colour distance is its Mahalanobis distance to the nearest cluster (in units of that cluster's own
+    spread); the thresholds come from the distances of the border pixels themselves.
 
     Attributes
     ----------
-    distance : (nL, 256, 256) float32 ndarray
-        For each cell of the (w·L, a + 128, b + 128) colour space (1 unit wide), its distance to the nearest
-        background cell.
-    lightness_weight : float
-        w: how much a change of lightness counts against the same change of hue (a, b).
+    means : (k, 3) float ndarray
+        The clusters' centres (L, a, b).
+    whiten : (k, 3, 3) float ndarray
+        Per cluster, ``W`` with ``Wᵀ W = Σ⁻¹`` (Σ the cluster's covariance plus ``QUANTISATION²``): the distance
+        of colour c is ``‖W (c - mean)‖``.
+    weights : (k,) float ndarray
+        Fraction of the border pixels in each cluster.
+    threshold : float
+        Above it a pixel may be the object: the border pixels' distance exceeded by a fraction ``false_alarm`` of
+        them (a background pixel beyond it is a false alarm). The lowest sensible threshold.
     n_samples : int
         Border pixels the model was learnt from.
     """
 
-    distance: np.ndarray
-    lightness_weight: float
+    means: np.ndarray
+    whiten: np.ndarray
+    weights: np.ndarray
+    threshold: float
     n_samples: int
+
+    @property
+    def n_clusters(self):
+        return len(self.means)
 
 
 def _border_pixels(image, border_px):
     b = border_px
-    return np.concatenate([image[:b].ravel(), image[-b:].ravel(), image[b:-b, :b].ravel(), image[b:-b, -b:].ravel()])
+    return np.concatenate([image[:b].reshape(-1, 3), image[-b:].reshape(-1, 3), image[b:-b, :b].reshape(-1, 3),
+                           image[b:-b, -b:].reshape(-1, 3)])
 
 
-def background_model(images: Sequence[ArrayLike], *, border_px: int = 4, lightness_weight: float = 0.3,
-                     min_count: float = 3) -> BackgroundModel:
+def _distances(lab, means, whiten):
+    """(N,) Mahalanobis distance of CIELAB colours ``lab`` (N, 3) to the nearest cluster."""
+    best = np.full(len(lab), np.inf, np.float32)
+    x = [np.ascontiguousarray(lab[:, c], dtype=np.float32) for c in range(3)]
+    for m, W in zip(means, whiten):
+        W = W.astype(np.float32)
+        c = [x[j] - np.float32(m[j]) for j in range(3)]
+        sq = np.zeros(len(lab), np.float32)
+        for r in range(3):                       # W is upper triangular: z_r = Σ_{j >= r} W[r, j] c_j
+            z = W[r, r] * c[r]
+            for j in range(r + 1, 3):
+                z += W[r, j] * c[j]
+            sq += z * z
+        np.minimum(best, sq, out=best)
+    return np.sqrt(best)
+
+
+def _kmeans(X, k, iterations=30):
+    """Lloyd's k-means, started deterministically at the quantiles of the first principal component.
+
+    Returns the labels (N,) and the number of clusters kept (empty ones are dropped)."""
+    Xc = X - X.mean(axis=0)
+    axis = np.linalg.svd(Xc[:: max(1, len(X) // 20000)], full_matrices=False)[2][0]
+    proj = Xc @ axis
+    order = np.argsort(proj)
+    centres = X[order[((np.arange(k) + 0.5) / k * len(X)).astype(int)]].astype(np.float64)
+    labels = np.zeros(len(X), np.int64)
+    for _ in range(iterations):
+        d = np.stack([((X - c) ** 2).sum(axis=1) for c in centres], axis=1)
+        new = np.argmin(d, axis=1)
+        if _ > 0 and np.array_equal(new, labels):
+            break
+        labels = new
+        for j in range(len(centres)):
+            if np.any(labels == j):
+                centres[j] = X[labels == j].mean(axis=0)
+    used = np.unique(labels)
+    return np.searchsorted(used, labels), len(used)
+
+
+def background_model(images: Sequence[ArrayLike], *, border_px: int = 4, n_clusters: int = 4,
+                     false_alarm: float = 1e-2, max_samples: int = 50_000) -> BackgroundModel:
     """Learn the background's colours from a frame ``border_px`` wide around every image.
 
-    The colours seen there (in CIELAB, lightness scaled by ``lightness_weight``) mark cells of a 1-unit grid; a
-    cell counts as background when at least ``min_count`` border pixels fall in it or its 26 neighbours (so a few
-    stray object pixels at the border do not count). A Euclidean distance transform of that set gives, for every
-    colour, its distance to the nearest background colour.
+    1. The frame's pixels (the object must not reach into it) are taken in plain CIELAB: lightness counts as much
+       as hue, so a grey object on a black cloth is as visible as an orange one on a blue wall.
+    2. They are grouped into at most ``n_clusters`` clusters (k-means): a background of several tones (a wall and a
+       table, a dark band) gets one cluster per tone. Each cluster keeps its mean and covariance (plus
+       :data:`QUANTISATION` ² on each axis); clusters holding less than ``false_alarm`` of the border (stray
+       pixels of the object or of dust) are dropped.
+    3. A colour's distance is its Mahalanobis distance to the nearest cluster. The border pixels are background, so
+       their own distances say how far the background strays: ``threshold`` is the distance that only a fraction
+       ``false_alarm`` of them exceed.
 
     Parameters
     ----------
     images : sequence of (H, W, 3) uint8 RGB images
     border_px : int
-        Width of the frame, pixels: the object must not reach into it.
-    lightness_weight : float
-        In (0, 1]: 1 is plain CIELAB; smaller values forgive shading and shadows on the background.
-    min_count : int
+        Width of the frame, pixels.
+    n_clusters : int
+        At most this many background tones.
+    false_alarm : float
+        In (0, 0.5): the fraction of background pixels allowed above ``threshold`` (they are scattered specks,
+        removed by :func:`clean_mask`, or a thin fringe along the object's outline).
+    max_samples : int
+        The frame's pixels are subsampled evenly to at most this many.
 
     Returns
     -------
@@ -112,12 +172,13 @@ def background_model(images: Sequence[ArrayLike], *, border_px: int = 4, lightne
     >>> img = np.zeros((40, 40, 3), np.uint8); img[...] = (40, 60, 200); img[15:25, 15:25] = (230, 120, 20)
     >>> m = background_model([img])
     >>> d = colour_distance(img, m)
-    >>> bool(d[20, 20] > 50), float(d[0, 0])
-    (True, 0.0)
+    >>> bool(d[20, 20] > 50 * m.threshold), float(d[0, 0]), m.n_clusters
+    (True, 0.0, 1)
     """
-    lightness_weight = _as_number(lightness_weight, "lightness_weight", lo=0, hi=1, open_lo=True)
     border_px = _as_number(border_px, "border_px", lo=1, integer=True)
-    min_count = _as_number(min_count, "min_count", lo=1)
+    n_clusters = _as_number(n_clusters, "n_clusters", lo=1, hi=16, integer=True)
+    false_alarm = _as_number(false_alarm, "false_alarm", lo=0, hi=0.5, open_lo=True)
+    max_samples = _as_number(max_samples, "max_samples", lo=100, integer=True)
     images = list(images)
     if not images:
         raise ValueError("images is empty: the background is learnt from at least one image")
@@ -126,20 +187,28 @@ def background_model(images: Sequence[ArrayLike], *, border_px: int = 4, lightne
         img = _as_image(img, f"images[{i}]")
         if min(img.shape[:2]) <= 2 * border_px:
             raise ValueError(f"images[{i}] ({img.shape[1]}x{img.shape[0]}) is too small for a {border_px}-pixel border")
-        samples.append(_border_pixels(_lab_cells(img, lightness_weight), border_px))
-    X = np.concatenate(samples)
-    nL = _n_lightness_cells(lightness_weight)
-    counts = np.bincount(X, minlength=nL * 256 * 256)
-    counts = ndimage.uniform_filter(counts.reshape(nL, 256, 256).astype(np.float32), 3, mode="constant") * 27
-    occupied = counts >= min_count - 1e-3
-    if not occupied.any():
-        raise ValueError(f"no colour is seen {min_count} times at the image borders: lower min_count")
-    dist = ndimage.distance_transform_edt(~occupied).astype(np.float32)
-    return BackgroundModel(dist, float(lightness_weight), int(len(X)))
+        samples.append(_border_pixels(img, border_px))
+    rgb = np.concatenate(samples)
+    rgb = rgb[:: -(-len(rgb) // max_samples)]
+    X = _lab(rgb).astype(np.float64)
+    labels, k = _kmeans(X, n_clusters)
+    means, whiten, weights = [], [], []
+    for j in range(k):
+        Xj = X[labels == j]
+        if len(Xj) < max(4, false_alarm * len(X)):
+            continue
+        cov = np.cov(Xj.T) + QUANTISATION ** 2 * np.eye(3)
+        means.append(Xj.mean(axis=0))
+        whiten.append(np.linalg.cholesky(np.linalg.inv(cov)).T)
+        weights.append(len(Xj) / len(X))
+    means, whiten, weights = np.array(means), np.array(whiten), np.array(weights)
+    d = _distances(X.astype(np.float32), means, whiten)
+    threshold = float(np.quantile(d, 1 - false_alarm))
+    return BackgroundModel(means, whiten, weights, threshold, int(len(X)))
 
 
 def colour_distance(image: ArrayLike, model: BackgroundModel) -> np.ndarray:
-    """Distance (CIELAB units, lightness weighted) of each pixel's colour to the nearest background colour.
+    """Each pixel's Mahalanobis distance, in plain CIELAB, to the nearest background cluster.
 
     Parameters
     ----------
@@ -149,11 +218,12 @@ def colour_distance(image: ArrayLike, model: BackgroundModel) -> np.ndarray:
     Returns
     -------
     (H, W) float32 ndarray
-        0 on colours seen at the borders; large on the object.
+        Small on the background's colours (in units of their own spread); large on the object.
     """
     if not isinstance(model, BackgroundModel):
         raise ValueError(f"model must be a BackgroundModel (from background_model); got {type(model).__name__}")
-    return model.distance.ravel()[_lab_cells(_as_image(image), model.lightness_weight)]
+    image = _as_image(image)
+    return _distances(_lab(image).reshape(-1, 3), model.means, model.whiten).reshape(image.shape[:2])
 
 
 def clean_mask(mask: ArrayLike, *, min_component: float = 0.02, max_hole: float = 0.002) -> np.ndarray:
@@ -197,17 +267,21 @@ def clean_mask(mask: ArrayLike, *, min_component: float = 0.02, max_hole: float 
     return out | (fill[lab] & ~out)
 
 
-def silhouette(image: ArrayLike, model: BackgroundModel, *, threshold: float = 2.5, min_component: float = 0.02,
-               max_hole: float = 0.002) -> np.ndarray:
-    """The object's silhouette: pixels whose colour is farther than ``threshold`` from every background colour.
+def silhouette(image: ArrayLike, model: BackgroundModel, *, threshold: float | None = None,
+               min_component: float = 0.02, max_hole: float = 0.002) -> np.ndarray:
+    """The object's silhouette: the pixels whose colour is far from every background colour, cleaned.
+
+    A pixel is the object when its distance (:func:`colour_distance`) exceeds ``threshold``; by default the
+    model's own, learnt from the border (``model.threshold``). :func:`segment_views` picks one for all views by how
+    well their silhouettes agree.
 
     Parameters
     ----------
     image : (H, W, 3) uint8 RGB
     model : BackgroundModel
         From :func:`background_model`.
-    threshold : float
-        CIELAB units (lightness weighted); the background's own colours are at distance 0.
+    threshold : float, optional
+        Mahalanobis distance (see :func:`colour_distance`).
     min_component, max_hole : float
         See :func:`clean_mask`.
 
@@ -215,7 +289,7 @@ def silhouette(image: ArrayLike, model: BackgroundModel, *, threshold: float = 2
     -------
     (H, W) bool ndarray
     """
-    threshold = _as_number(threshold, "threshold", lo=0)
+    threshold = model.threshold if threshold is None else _as_number(threshold, "threshold", lo=0)
     return clean_mask(colour_distance(image, model) > threshold, min_component=min_component, max_hole=max_hole)
 
 

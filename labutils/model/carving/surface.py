@@ -1,5 +1,5 @@
 """The carved volume's surface (marching cubes, scikit-image), a mesh's silhouette in a view and its IoU with the
-masks, and the colour threshold chosen by how well the silhouettes agree."""
+masks."""
 from collections.abc import Sequence
 
 import numpy as np
@@ -7,19 +7,10 @@ from numpy.typing import ArrayLike
 from skimage.measure import marching_cubes
 
 from ...core.validation import as_image_size, as_mesh
-from .silhouettes import _as_number, clean_mask, mask_iou, signed_distance_map
-from .voxels import (
-    Carving,
-    VoxelGrid,
-    _as_cameras,
-    _carve_maps,
-    _check_masks,
-    bounding_box_from_silhouettes,
-    project_with_depth,
-)
+from .silhouettes import _as_number, mask_iou
+from .voxels import Carving, _as_cameras, _check_masks, project_with_depth
 
-__all__ = ["surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious", "THRESHOLD_CANDIDATES",
-           "choose_threshold"]
+__all__ = ["surface_mesh", "mesh_volume", "render_silhouette", "silhouette_ious"]
 
 
 def surface_mesh(carving: Carving, *, level: float = 0.0, step_size: int = 1
@@ -164,66 +155,3 @@ def silhouette_ious(vertices: ArrayLike, faces: ArrayLike, masks: Sequence[Array
     P = _as_cameras(P)
     masks = _check_masks(masks, len(P))
     return np.array([mask_iou(render_silhouette(vertices, faces, Pv, m.shape[::-1]), m) for Pv, m in zip(P, masks)])
-
-
-THRESHOLD_CANDIDATES = (0.5, 1.5, 2.5, 3.5, 5.0)
-"""Colour thresholds tried by :func:`choose_threshold` (CIELAB units, lightness weighted)."""
-
-
-def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, *,
-                     candidates: Sequence[float] = THRESHOLD_CANDIDATES, n: int = 40, every: int = 1,
-                     min_component: float = 0.02, max_hole: float = 0.002) -> tuple[float, np.ndarray]:
-    """Pick the colour threshold whose silhouettes agree best with each other (no ground truth needed).
-
-    With exact cameras, the visual hull of perfect silhouettes reprojects exactly onto each of them; a mask that
-    misses part of the object carves it away in every other view, and one with extra background is carved away
-    by the others. So for each candidate threshold we carve a coarse grid (``n`` voxels along the box's longest
-    side), take its surface and score the silhouettes' agreement: the median over views of the IoU between the
-    surface's silhouette and the mask. The best-scoring threshold wins.
-
-    Parameters
-    ----------
-    distances : sequence of (H, W) float arrays
-        :func:`colour_distance` of each view.
-    P : (V, 3, 4) array_like
-    candidates : sequence of float
-    n : int
-    every : int
-        Score every ``every``-th view only (all views are carved).
-
-    Returns
-    -------
-    best : float
-    scores : (len(candidates), 2) ndarray
-        Per candidate: the median and the minimum IoU over the views scored.
-
-    Raises
-    ------
-    ValueError
-        If no candidate leaves a non-empty carving.
-    """
-    P = _as_cameras(P)
-    distances = list(distances)
-    if len(distances) != len(P):
-        raise ValueError(f"distances has {len(distances)} maps for {len(P)} cameras: one per view")
-    candidates = sorted(_as_number(c, "candidates", lo=0) for c in candidates)
-    if not candidates:
-        raise ValueError("candidates is empty: give at least one threshold")
-    n = _as_number(n, "n", lo=4, integer=True)
-    every = _as_number(every, "every", lo=1, integer=True)
-    masks_of = {c: [clean_mask(d > c, min_component=min_component, max_hole=max_hole) for d in distances]
-                for c in candidates}
-    box = bounding_box_from_silhouettes(masks_of[candidates[0]], P)    # the most inclusive masks: the largest box
-    grid = VoxelGrid.from_box(box, n)
-    scores = np.full((len(candidates), 2), -1.0)
-    for k, c in enumerate(candidates):
-        masks = masks_of[c]
-        carving = _carve_maps([signed_distance_map(m) for m in masks], P, grid)
-        if not carving.occupied.any():
-            continue
-        V, F, _ = surface_mesh(carving)
-        ious = silhouette_ious(V, F, masks[::every], P[::every])
-        scores[k] = np.median(ious), ious.min()
-    if np.all(scores[:, 0] < 0):
-        raise ValueError("every candidate threshold carves every voxel away: the masks and cameras disagree")
-    return candidates[int(np.argmax(scores[:, 0]))], scores
