@@ -130,7 +130,7 @@ def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     Raises
     ------
     ValueError
-        Wrong shapes, non-finite values, a zero ray, or collinear (or coincident) world points.
+        Wrong shapes, non-finite values, a zero ray, 3 coincident rays, or collinear (or coincident) world points.
 
     Examples
     --------
@@ -147,6 +147,8 @@ def p3p_bearings(X: ArrayLike, y: ArrayLike) -> list:
     if np.any(n <= 0):
         raise ValueError("y has a zero-length ray")
     y = y / n[:, None]
+    if max(np.linalg.norm(_cross(y[0], y[1])), np.linalg.norm(_cross(y[0], y[2]))) < 1e-10:
+        raise ValueError("the 3 rays y coincide (one pixel thrice): no pose puts 3 non-collinear points on one ray")
     d12, d13, d23 = X[0] - X[1], X[0] - X[2], X[1] - X[2]
     a12, a13, a23 = d12 @ d12, d13 @ d13, d23 @ d23
     c = _cross(d12, d13)
@@ -404,6 +406,8 @@ class PnPResult:
         Refinement rounds.
     ransac_inliers : (N,) bool ndarray
         The inliers of the best RANSAC sample, before refinement.
+    converged, p_chance : bool, float
+        RANSAC reached its ``confidence``; its chance bound (:class:`labutils.core.ransac.RansacResult`).
     """
 
     R: np.ndarray
@@ -412,6 +416,8 @@ class PnPResult:
     n_iter: int
     n_refine: int
     ransac_inliers: np.ndarray = field(repr=False)
+    converged: bool = True
+    p_chance: float = np.nan
 
     @property
     def n_inliers(self):
@@ -428,7 +434,9 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     reprojects within ``threshold_px`` pixels and lies in front of the camera. The loop stops once a
     sample free of outliers has been drawn with probability ``confidence`` (H&Z eq. 4.18). With
     ``refine`` the pose is then refined on the inliers (:func:`refine_pose`), the inliers are
-    recomputed, and this is repeated until the set stops changing (at most 5 times).
+    recomputed, and this is repeated until the set stops changing (at most 5 times). Pixels unrelated to the
+    points (uniform in their ``w × h`` bounding box) would be inliers of a pose with probability at most
+    ``π threshold_px² / (w h)``: a pose no better than that is refused (:mod:`labutils.core.ransac`).
 
     Parameters
     ----------
@@ -456,8 +464,8 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     Raises
     ------
     ValueError
-        Wrong shapes, NaN/inf, N < 4, all points collinear, no ``rng``, every sample degenerate, or no
-        pose that explains more than the three sampled points.
+        Wrong shapes, NaN/inf, N < 4, all points collinear, all pixels coincident, no ``rng``, every sample
+        degenerate, or no pose better than chance (e.g. pure noise).
 
     Examples
     --------
@@ -465,8 +473,8 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     >>> X = rng.uniform(-1, 1, (30, 3)) + [0, 0, 6]; x = X @ K.T; x = x[:, :2] / x[:, 2:]
     >>> x[:5] = rng.uniform(0, 640, (5, 2))
     >>> res = pnp_ransac(X, x, K, rng=rng)
-    >>> bool(np.allclose(res.R, np.eye(3), atol=1e-9)), res.n_inliers, bool(res.inliers[5:].all())
-    (True, 25, True)
+    >>> bool(np.allclose(res.R, np.eye(3), atol=1e-9)), res.n_inliers, bool(res.inliers[5:].all()), res.converged
+    (True, 25, True, True)
     """
     X = as_points(X, "X", dim=3, min_n=4)
     x = as_points(x, "x", like=(X, "X"), min_n=4)
@@ -475,6 +483,8 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     threshold_px = as_positive(threshold_px, "threshold_px")
     if _is_collinear(X):
         raise ValueError("all world points are collinear (or coincide): the pose is not determined")
+    if (spread := np.ptp(x, axis=0)).max() <= threshold_px:
+        raise ValueError(f"all pixels x coincide (within {spread.max():.3g} px <= threshold_px): no pose is determined")
     y = bearings(x, K)
 
     def fit(idx):                               # checked once above: the loop calls the kernels
@@ -483,8 +493,8 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     def errors(model):
         return _reprojection_errors(X, x, K, *model)
 
-    (R, t), inliers, n_iter = ransac(len(X), 3, fit, errors, threshold_px, rng=rng, confidence=confidence,
-                                     max_iter=max_iter)
+    (R, t), inliers, n_iter = rr = ransac(len(X), 3, fit, errors, threshold_px, rng=rng, confidence=confidence,
+                                          max_iter=max_iter, chance=np.pi * threshold_px**2 / max(spread.prod(), 1e-9))
     ransac_inliers = inliers.copy()
     if inliers.sum() < 4:
         raise ValueError(f"no pose explains more than the 3 sampled points ({n_iter} samples): "
@@ -497,4 +507,5 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
         if new.sum() < 4 or np.array_equal(new, inliers):
             break
         inliers = new
-    return PnPResult(R=R, t=t, inliers=inliers, n_iter=n_iter, n_refine=n_refine, ransac_inliers=ransac_inliers)
+    return PnPResult(R=R, t=t, inliers=inliers, n_iter=n_iter, n_refine=n_refine, ransac_inliers=ransac_inliers,
+                     converged=rr.converged, p_chance=rr.p_chance)

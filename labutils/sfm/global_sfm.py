@@ -292,9 +292,10 @@ def global_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, thr
     note(f"BA from the linear start: {res.cost_text()}")
     X, used = _triangulate(tracks, Ks, R, t, reg, threshold_px, min_angle_deg)
     # views the pairs could not place (too few tracks shared with any one view): by PnP, as incremental SfM does
+    why = {}                                      # view -> why PnP did not register it (the last attempt)
     for _ in range(V):
         added = _resection(tracks, Ks, R, t, X, reg, rng=rng, threshold_px=threshold_px, min_inliers=min_inliers,
-                           confidence=confidence)
+                           confidence=confidence, why=why)
         if not added:
             break
         note(f"registered by PnP on the triangulated points: views {added}")
@@ -308,7 +309,8 @@ def global_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator, thr
          f"{threshold_px:g} px")
     missing = np.flatnonzero(~reg)
     if missing.size:
-        note(f"views not registered: {missing.tolist()}")
+        note(f"views not registered: {missing.tolist()}"
+             + "".join(f"; {v}: {why[v]}" for v in missing.tolist() if v in why))
     timings["total"] = time.perf_counter() - t_start
     R[~reg], t[~reg] = np.nan, np.nan
     rec = Reconstruction(R=R, t=t, registered=reg.copy(), X=X, inliers=inliers, order=[], K=Ks, timings=timings,
@@ -325,9 +327,10 @@ def _triangulate(tracks, Ks, R, t, reg, threshold_px, min_angle_deg):
                               threshold_px=threshold_px, min_angle_deg=min_angle_deg)
 
 
-def _resection(tracks, Ks, R, t, X, reg, *, rng, threshold_px, min_inliers, confidence):
+def _resection(tracks, Ks, R, t, X, reg, *, rng, threshold_px, min_inliers, confidence, why=None):
     """Register (in place) each unregistered view that sees ``min_inliers`` triangulated points and whose PnP-RANSAC
-    keeps as many inliers; returns the views added."""
+    keeps as many inliers; returns the views added, and writes why the others were not into ``why``."""
+    why = {} if why is None else why
     seen = np.all(np.isfinite(tracks), axis=-1) & np.isfinite(X[:, 0])[None]
     added = []
     for v in np.flatnonzero(~reg & (seen.sum(1) >= min_inliers)):
@@ -335,11 +338,15 @@ def _resection(tracks, Ks, R, t, X, reg, *, rng, threshold_px, min_inliers, conf
         try:
             pose = pnp_ransac(X[idx], tracks[v, idx], Ks[v], threshold_px=threshold_px, rng=rng,
                               confidence=confidence)
-        except ValueError:
+        except ValueError as exc:                 # degenerate, or no pose better than chance
+            why[int(v)] = f"PnP refused ({exc})"
             continue
         if pose.inliers.sum() >= min_inliers:
             R[v], t[v], reg[v] = pose.R, pose.t, True
             added.append(int(v))
+            why.pop(int(v), None)
+        else:
+            why[int(v)] = f"{pose.n_inliers} PnP inliers < {min_inliers}"
     return added
 
 

@@ -381,7 +381,9 @@ def incremental_sfm(tracks: ArrayLike, K: ArrayLike, *, rng: np.random.Generator
         timings[f"{kind}_ba"] = timings.get(f"{kind}_ba", 0.0) + time.perf_counter() - t0
         ba_note = "" if res is None else (f"{res.cost_initial:.4g} -> {res.cost_final:.4g} px² ({res.n_iter} it, "
                                           f"{res.seconds:.2f} s, {res.residuals.shape[0]} obs)")
-        note(f"view {v}: {inl.sum()} PnP inliers of {idx.size}, {n_new} new points; {kind} BA {ba_note}; "
+        stop = "" if pose.converged else ", RANSAC stopped at max_iter"
+        note(f"view {v}: {inl.sum()} PnP inliers of {idx.size} (p_chance {pose.p_chance:.1g}{stop}), {n_new} new "
+             f"points; {kind} BA {ba_note}; "
              f"{n_bad} observations rejected, {n_drop} points dropped; {int(st.triangulated.sum())} points")
         if on_register is not None:
             on_register(_result(st, order, timings, log))

@@ -7,7 +7,7 @@ from ..bundle.adjust import bundle_adjust
 from ..core.geometry import camera_center
 from ..core.validation import as_calibration, as_points, as_rng
 from ..twoview.epipolar import fundamental_ransac
-from ..twoview.essential import essential_from_fundamental, pose_from_essential
+from ..twoview.essential import check_parallax, essential_from_fundamental, pose_from_essential
 from ..twoview.triangulation import ray_angles_deg, triangulate_tracks
 
 
@@ -23,6 +23,8 @@ def two_view_reconstruction(x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: Arr
     bundle-adjusted (camera 1 and the baseline length held) and every correspondence is triangulated
     again with the refined pose: F ignores the calibration, and from a narrow field of view (the
     dinosaur's) its translation direction can be off by tens of degrees, which the calibrated BA repairs.
+    Refused (``ValueError``): F no better than chance (pure noise), coincident pixels, no motion, and inliers
+    that a pure rotation explains as well as F (:func:`labutils.twoview.essential.check_parallax`: no baseline).
 
     Parameters
     ----------
@@ -50,6 +52,7 @@ def two_view_reconstruction(x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: Arr
     as_rng(rng)
     F, inl = fundamental_ransac(x1, x2, threshold_px=threshold_px, rng=rng, confidence=confidence)
     inl = np.asarray(inl, bool)
+    check_parallax(F, x1[inl], x2[inl], K1, K2)        # a pure rotation explains them as well: no baseline
     E = essential_from_fundamental(F, K1, K2)
     R, t = pose_from_essential(E, x1[inl], x2[inl], K1, K2)
     Ks = np.stack([K1, K2])

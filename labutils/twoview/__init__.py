@@ -19,12 +19,14 @@ from .epipolar import (
     sampson_distance,
 )
 from .essential import (
+    check_parallax,
     cheirality_choice,
     cheirality_counts,
     decompose_essential,
     essential_from_fundamental,
     fundamental_from_pose,
     pose_from_essential,
+    pure_rotation,
 )
 from .gold_standard import GoldStandardProblem, GoldStandardResult, fundamental_gold_standard, gold_standard_residuals
 from .triangulation import (
@@ -41,4 +43,5 @@ __all__ = ["ModelSelection", "design_matrix", "fundamental_7point", "fundamental
            "cheirality_choice", "cheirality_counts", "decompose_essential", "essential_from_fundamental",
            "fundamental_from_pose", "pose_from_essential", "GoldStandardProblem", "GoldStandardResult",
            "fundamental_gold_standard", "gold_standard_residuals", "fundamental_residual", "ray_angles_deg",
-           "triangulate", "triangulate_multiview", "triangulate_optimal", "triangulate_tracks"]
+           "triangulate", "triangulate_multiview", "triangulate_optimal", "triangulate_tracks", "pure_rotation",
+           "check_parallax"]

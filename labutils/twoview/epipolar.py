@@ -643,7 +643,8 @@ def _seven_point(x1, x2):
 
 
 def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator, threshold_px: float = 1.0,
-                       confidence: float = 0.999, max_iter: int = 10000, refits: int = 5) -> tuple:
+                       confidence: float = 0.999, max_iter: int = 10000, refits: int = 5,
+                       max_p_chance: float = 0.05) -> tuple:
     """Robust F: adaptive RANSAC on minimal 7-point samples, then the 8-point on the inliers (H&Z Alg. 11.4).
 
     Why 7-point samples: a sample of 7 instead of 8 needs fewer trials for the same confidence
@@ -651,7 +652,11 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
     is exactly of rank 2, so its Sampson distances are meaningful; the up-to-3 real roots are all scored.
     A sample with a rank-deficient design matrix (e.g. 7 points on one plane) gives no candidate.
     After the loop the 8-point is fitted to the inliers, the inliers recomputed with it, and this is
-    repeated (at most ``refits`` times) until the inlier set stops changing.
+    repeated (at most ``refits`` times) until the inlier set stops changing. The sampled F must be better than
+    chance (:mod:`labutils.core.ransac`): the fraction ``p`` of 4096 unrelated pairs, spread evenly (a lattice)
+    over the bounding boxes of x1 and of x2, within ``threshold_px`` of this F is the chance that an unrelated
+    correspondence is its inlier; an inlier count that ``B(N - 7, p)`` reaches in the models tried with
+    probability above ``max_p_chance`` is refused.
 
     Parameters
     ----------
@@ -668,6 +673,8 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
         At most this many samples.
     refits : int
         Inlier re-estimation rounds after sampling.
+    max_p_chance : float
+        Refuse an F whose inlier count unrelated pixels would reach with a probability above this.
 
     Returns
     -------
@@ -678,8 +685,9 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
     Raises
     ------
     ValueError
-        Bad input as for :func:`fundamental_8point`, no ``rng``, no non-degenerate sample, or degenerate
-        inliers (the final 8-point's checks).
+        Bad input as for :func:`fundamental_8point`, no ``rng``, coincident pixels, no motion (every
+        ``|x2 - x1| <= threshold_px``), no non-degenerate sample, no F better than chance (e.g. pure noise),
+        or degenerate inliers (the final 8-point's checks).
 
     Examples
     --------
@@ -694,9 +702,17 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
     as_rng(rng)
     threshold_px = as_positive(threshold_px, "threshold_px")
     refits = as_count(refits, "refits", 0)
+    for name, x in (("x1", x1), ("x2", x2)):
+        if np.ptp(x, axis=0).max() <= threshold_px:
+            raise ValueError(f"all pixels {name} coincide (within threshold_px = {threshold_px:g}): no F is determined")
+    if np.abs(x2 - x1).max() <= threshold_px:
+        raise ValueError(f"no motion: every |x2 - x1| <= threshold_px = {threshold_px:g}, so F is not determined")
+    u = (np.arange(4096)[:, None] * (1597 ** np.arange(4) % 4096) % 4096 + 0.5) / 4096     # a 4D lattice
+    r1, r2 = x1.min(0) + u[:, :2] * np.ptp(x1, axis=0), x2.min(0) + u[:, 2:] * np.ptp(x2, axis=0)
+    chance = lambda F: (np.sum(sampson_distance(F, r1, r2) < threshold_px) + 1) / (len(u) + 2)  # noqa: E731
     F, inliers, _ = ransac(len(x1), 7, lambda idx: _seven_point(x1[idx], x2[idx]),
                            lambda F: sampson_distance(F, x1, x2), threshold_px, rng=rng,
-                           confidence=confidence, max_iter=max_iter)
+                           confidence=confidence, max_iter=max_iter, chance=chance, max_p_chance=max_p_chance)
     tested = None
     for _ in range(refits):
         if inliers.sum() < 8:
