@@ -1,6 +1,7 @@
 """Input checks shared by every module: clear ``ValueError`` messages that name the argument, what was expected
 and what it got. Nothing here reshapes silently: a ``(3, V)`` array where ``(V, 3)`` is expected is an error."""
 import numbers
+import warnings
 
 import numpy as np
 
@@ -9,13 +10,31 @@ def as_array(x, name, expected):
     """``x`` as a float array (any shape), or ``ValueError`` naming ``name`` and the ``expected`` shape when it is not
     numeric (a string, a ragged list).
 
+    Complex and boolean arrays are refused, never cast (a complex number's imaginary part would be dropped, and
+    ``True`` would pass as 1).
+
     >>> as_array([[1, 2], [3]], "x", "(N, 2)")
     Traceback (most recent call last):
     ...
     ValueError: x must be a numeric array of shape (N, 2): ...
+    >>> as_array([1 + 2j, 3], "x", "(N,)")
+    Traceback (most recent call last):
+    ...
+    ValueError: x must be real; got a complex array (dtype complex128) of shape (2,): ...
     """
+    if isinstance(x, (str, bytes)):
+        raise ValueError(f"{name} must be a numeric array of shape {expected}; got the string {x!r:.40}")
     try:
-        a = np.asarray(x, dtype=float)
+        raw = np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array of shape {expected}: {exc}") from None
+    if raw.dtype.kind == "c":
+        raise ValueError(f"{name} must be real; got a complex array (dtype {raw.dtype}) of shape {raw.shape}: "
+                         "take .real only if the imaginary part is known to be zero")
+    if raw.dtype.kind == "b" or raw.dtype == object and any(isinstance(v, (bool, np.bool_)) for v in raw.flat):
+        raise ValueError(f"{name} must be a numeric array of shape {expected}; got booleans (dtype {raw.dtype})")
+    try:
+        a = np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a numeric array of shape {expected}: {exc}") from None
     return a
@@ -97,8 +116,22 @@ def as_vector3(t, name="t"):
     return as_matrix(t, name, (3,))
 
 
-def as_rotation(R, name="R", tol=1e-6):
+ROTATION_TOL = 1e-4
+"""How far (largest entry of ``|R Rᵀ - I|``) a matrix may be from SO(3) and still be read as a rotation: published
+cameras print their rotations to about 6 digits (Middlebury's parameter files, EPFL's ground truth are 1e-6 off)."""
+_ROUNDOFF = 1e-9      # closer than this: round-off of a computed rotation, returned as it is, without a word
+
+
+class RotationProjectedWarning(UserWarning):
+    """A matrix within :data:`ROTATION_TOL` of a rotation but not within round-off was replaced by the nearest
+    rotation; the one-line message names the argument and the largest correction."""
+
+
+def as_rotation(R, name="R", tol=ROTATION_TOL):
     """Return ``R`` as a (3, 3) rotation (orthonormal, det +1), or raise ``ValueError``.
+
+    A matrix within ``tol`` of a rotation (a rotation printed to 6 digits) is replaced by the nearest rotation, with
+    a :class:`RotationProjectedWarning` that reports the largest correction; see :func:`as_rotations`.
 
     >>> as_rotation(2 * np.eye(3))
     Traceback (most recent call last):
@@ -108,13 +141,34 @@ def as_rotation(R, name="R", tol=1e-6):
     return as_rotations(as_matrix(R, name, (3, 3))[None], name, tol)[0]
 
 
-def as_rotations(R, name="R", tol=1e-6, n=None, like_name=None):
+def nearest_rotations(M):
+    """The rotations nearest (Frobenius) to a ``(V, 3, 3)`` stack of matrices with positive determinant: ``U Vᵀ``
+    of each SVD (H&Z Sec. A4.1.2; the matrices here are close to rotations, so no reflection can appear)."""
+    U, _, Vt = np.linalg.svd(M)
+    return U @ Vt
+
+
+def as_rotations(R, name="R", tol=ROTATION_TOL, n=None, like_name=None):
     """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one.
+
+    The rule, the same wherever a rotation is read or checked: a matrix off SO(3) by at most round-off (1e-9) is
+    returned as it is; one off by at most ``tol`` (:data:`ROTATION_TOL`, 1e-4: rotations printed to 6 digits) is
+    replaced by the nearest rotation (SVD), and a :class:`RotationProjectedWarning` reports, in one line, the
+    argument and the largest correction of an entry; beyond ``tol``, or with det < 0, it is an error.
 
     >>> as_rotations(np.stack([np.eye(3), -np.eye(3)]))
     Traceback (most recent call last):
     ...
     ValueError: R[1] is not a rotation matrix (orthonormal with det +1): |R Rᵀ - I| = 0, det R = -1
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     c, s = np.cos(0.3), np.sin(0.3)
+    ...     R = as_rotations(np.round([[[c, 0, s], [0, 1, 0], [-s, 0, c]]], 6))      # printed to 6 digits
+    >>> print(caught[0].message)
+    R is 1.1e-06 off a rotation (within the tolerance 0.0001): replaced by the nearest rotation, largest correction 5e-07
+    >>> float(np.abs(R[0] @ R[0].T - np.eye(3)).max()) < 1e-15
+    True
     """
     expected = "(V, 3, 3)" if n is None else f"({n}, 3, 3)"
     a = _as_float_array(R, name, expected)
@@ -127,12 +181,24 @@ def as_rotations(R, name="R", tol=1e-6, n=None, like_name=None):
         raise ValueError(f"{who} has non-finite entries (NaN or inf)")
     err = np.abs(a @ np.swapaxes(a, 1, 2) - np.eye(3)).max(axis=(1, 2))
     det = np.linalg.det(a)
-    bad = np.flatnonzero((err > tol) | (det < 0))
+    bad = np.flatnonzero((err > tol) | (det <= 0))
     if bad.size:
         k = int(bad[0])
         who = f"{name}[{k}]" if len(a) > 1 or n is not None else name
         raise ValueError(f"{who} is not a rotation matrix (orthonormal with det +1): "
                          f"|R Rᵀ - I| = {err[k]:.3g}, det R = {det[k]:.3g}")
+    off = np.flatnonzero(err > _ROUNDOFF)
+    if off.size:
+        a = a.copy()
+        near = nearest_rotations(a[off])
+        change = np.abs(near - a[off]).max(axis=(1, 2))
+        a[off] = near
+        k = int(off[np.argmax(change)])
+        who = f"{name}[{k}]" if len(a) > 1 or n is not None else name
+        many = f" (and {off.size - 1} more)" if off.size > 1 else ""
+        warnings.warn(f"{who} is {err[k]:.2g} off a rotation (within the tolerance {tol:g}){many}: replaced by the "
+                      f"nearest rotation, largest correction {change.max():.2g}", RotationProjectedWarning,
+                      stacklevel=3)
     return a
 
 
@@ -167,7 +233,9 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
     ----------
     K : (3, 3) or (V, 3, 3) array_like
         Upper-triangular or not (skew allowed): what is checked is that it is finite, its last row is
-        ``(0, 0, k)`` with ``k != 0``, and it is invertible.
+        ``(0, 0, k)`` with ``k != 0``, its focal lengths ``K[0, 0] / k`` and ``K[1, 1] / k`` are positive (an RQ
+        split without fixing the signs gives negative ones, and a camera that sees the world mirrored), and it is
+        invertible.
     name : str
     n_views : int, optional
         When given, a ``(3, 3)`` K is repeated for ``n_views`` views and a stack must have ``n_views`` entries;
@@ -187,6 +255,10 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
     Traceback (most recent call last):
     ...
     ValueError: K is singular (det = 0): a calibration matrix must be invertible
+    >>> as_calibration(np.diag([-800.0, -800.0, 1.0]))
+    Traceback (most recent call last):
+    ...
+    ValueError: K must have positive focal lengths; got fx = -800, fy = -800 (with K[2, 2] = 1): ...
     """
     expected = "(3, 3)" if n_views is None else f"(3, 3) or ({n_views}, 3, 3)"
     a = _as_float_array(K, name, expected)
@@ -211,6 +283,10 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
         det = np.linalg.det(Kn)
         if abs(det) <= 1e-12 * np.abs(Kn).max() ** 3:
             raise ValueError(f"{who} is singular (det = {det:.3g}): a calibration matrix must be invertible")
+        if Kn[0, 0] <= 0 or Kn[1, 1] <= 0:
+            raise ValueError(f"{who} must have positive focal lengths; got fx = {Kn[0, 0]:.6g}, fy = {Kn[1, 1]:.6g} "
+                             "(with K[2, 2] = 1): after an RQ split, flip the signs so that diag(K) > 0 "
+                             "(negate the columns of K and the rows of R together)")
     out = stack / stack[:, 2:3, 2:3]
     return out[0] if single and n_views is None else out.reshape(a.shape)
 
@@ -243,6 +319,110 @@ def as_fundamental(F, name="F"):
         raise ValueError(f"{name} does not have rank 2 (singular values {s / s[0]} after scaling): "
                          "enforce rank 2 first (H&Z Sec. 11.1.1)")
     return (U[:, :2] * (s[:2] / s[0])) @ Vt[:2] / np.linalg.norm(s[:2] / s[0]), Vt[2], U[:, 2]
+
+
+def as_essential(E, name="E", tol=1e-5):
+    """``E`` as a finite (3, 3) essential matrix, or ``ValueError``: two equal singular values and a zero one, each
+    within ``tol`` relative to the largest (H&Z Result 9.17). ``E = I`` (rank 3) or a ``K2ᵀ F K1`` not projected
+    onto the essential manifold is refused: its four "poses" would be chosen from without meaning.
+
+    >>> as_essential(np.eye(3))
+    Traceback (most recent call last):
+    ...
+    ValueError: E is not an essential matrix: its singular values relative to the largest are [1. 1. 1.]; ...
+    """
+    E = as_matrix(E, name, (3, 3))
+    s = np.linalg.svd(E, compute_uv=False)
+    if s[0] == 0 or s[1] <= 1e-12 * s[0]:
+        raise ValueError(f"{name} has rank < 2 (singular values {s}): not an essential matrix")
+    if s[2] > tol * s[0] or s[0] - s[1] > tol * s[0]:
+        raise ValueError(f"{name} is not an essential matrix: its singular values relative to the largest are "
+                         f"{np.round(s / s[0], 6)}; an essential matrix has (1, 1, 0) (within {tol:g}); project it "
+                         "first (U diag(1, 1, 0) Vᵀ, as essential_from_fundamental does)")
+    return E
+
+
+def as_camera_matrix(P, name="P"):
+    """``P`` as a finite (3, 4) camera matrix of rank 3, or ``ValueError`` (a rank-deficient P has no centre and
+    images every point onto a line or a point).
+
+    >>> as_camera_matrix(np.outer([1.0, 2, 3], [1.0, 0, 0, 1]))
+    Traceback (most recent call last):
+    ...
+    ValueError: P has rank 1 (singular values [5.29 0.   0.  ]): a camera matrix has rank 3
+    """
+    P = as_matrix(P, name, (3, 4))
+    s = np.linalg.svd(P, compute_uv=False)
+    rank = int(np.sum(s > 1e-12 * s[0])) if s[0] > 0 else 0
+    if rank < 3:
+        raise ValueError(f"{name} has rank {rank} (singular values {np.round(s, 3)}): a camera matrix has rank 3")
+    return P
+
+
+def as_camera_matrices(Ps, name="Ps"):
+    """A ``(V, 3, 4)`` stack of finite camera matrices of rank 3, or ``ValueError`` naming the first bad one."""
+    a = _as_float_array(Ps, name, "(V, 3, 4)")
+    if a.ndim != 3 or a.shape[1:] != (3, 4):
+        raise ValueError(f"{name} must have shape (V, 3, 4); got shape {a.shape}")
+    for k, P in enumerate(a):
+        as_camera_matrix(P, f"{name}[{k}]")
+    return a
+
+
+def as_indices(idx, name, n, *, length=None, like_name=None, what="items"):
+    """A 1-D int64 array of indices in ``0..n-1``, or ``ValueError``.
+
+    Integers only: a boolean mask is refused (NumPy would read ``True``/``False`` as 1/0, or select rows), and so
+    are floats (even integral ones) and negative indices (which would wrap to the end).
+
+    Parameters
+    ----------
+    idx : (M,) array_like of int
+    name : str
+    n : int
+        How many ``what`` there are (the indices' range is ``0..n-1``).
+    length : int, optional
+        When given, ``idx`` must have this many entries (to pair up with ``like_name``).
+
+    >>> as_indices([0, 2, 1], "camera_indices", 3)
+    array([0, 2, 1])
+    >>> as_indices(np.array([True, False]), "camera_indices", 3, what="cameras")
+    Traceback (most recent call last):
+    ...
+    ValueError: camera_indices must be integer indices in 0..2 (cameras); got a boolean array: ...
+    """
+    try:
+        a = np.asarray(idx)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be a 1-D integer array of indices in 0..{n - 1}: {exc}") from None
+    if a.dtype.kind == "b":
+        raise ValueError(f"{name} must be integer indices in 0..{n - 1} ({what}); got a boolean array: "
+                         "np.flatnonzero(mask) gives the indices of a mask")
+    if a.ndim != 1 or (a.size and a.dtype.kind not in "iu"):
+        raise ValueError(f"{name} must be a 1-D integer array of indices in 0..{n - 1} ({what}); got shape "
+                         f"{a.shape}, dtype {a.dtype}")
+    if length is not None and a.shape[0] != length:
+        raise ValueError(f"{name} has {a.shape[0]} entries but {like_name or 'its partner'} has {length}")
+    if a.size and (a.min() < 0 or a.max() >= n):
+        raise ValueError(f"{name} must hold indices in 0..{n - 1} ({what}); got {int(a.min())}..{int(a.max())}")
+    return a.astype(np.int64)
+
+
+def as_mask(mask, name, shape):
+    """A boolean mask of ``shape``: a bool array, or numbers that are all 0 or 1; ``ValueError`` otherwise.
+
+    >>> as_mask([[1, 0]], "visible", (1, 2))
+    array([[ True, False]])
+    """
+    try:
+        a = np.asarray(mask)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be a boolean array of shape {shape}: {exc}") from None
+    if a.shape != tuple(shape) or a.dtype.kind not in "biuf" or (a.dtype.kind != "b" and a.size and
+                                                                  not np.all((a == 0) | (a == 1))):
+        raise ValueError(f"{name} must be a boolean array of shape {tuple(shape)}; got shape {a.shape}, "
+                         f"dtype {a.dtype}")
+    return a.astype(bool)
 
 
 def as_rng(rng, name="rng"):
