@@ -12,8 +12,7 @@ def _rotation_stack(R, name):
     a = as_array(R, name, "(3, 3) or (..., 3, 3)")
     if a.ndim < 2 or a.shape[-2:] != (3, 3):
         raise ValueError(f"{name} must have shape (3, 3) or (..., 3, 3); got shape {a.shape}")
-    as_rotations(a.reshape(-1, 3, 3), name)
-    return a
+    return as_rotations(a.reshape(-1, 3, 3), name).reshape(a.shape)
 
 
 def rotation_error_deg(R_est: ArrayLike, R_true: ArrayLike) -> np.ndarray:

@@ -369,43 +369,50 @@ def as_camera_matrices(Ps, name="Ps"):
     return a
 
 
-def as_indices(idx, name, n, *, length=None, like_name=None, what="items"):
+def as_indices(idx, name, n, *, length=None, like_name="camera_indices", what="item", holder=None):
     """A 1-D int64 array of indices in ``0..n-1``, or ``ValueError``.
 
-    Integers only: a boolean mask is refused (NumPy would read ``True``/``False`` as 1/0, or select rows), and so
-    are floats (even integral ones) and negative indices (which would wrap to the end).
+    Integers only: a boolean mask is refused (NumPy would read ``True``/``False`` as 1/0), and so are floats (even
+    integral ones); an index out of range (a negative one would wrap to the end) is named with its position.
 
     Parameters
     ----------
     idx : (M,) array_like of int
     name : str
     n : int
-        How many ``what`` there are (the indices' range is ``0..n-1``).
+        How many ``what``s there are (the indices' range is ``0..n-1``), held by the argument ``holder``.
     length : int, optional
-        When given, ``idx`` must have this many entries (to pair up with ``like_name``).
+        When given, ``idx`` must have this many entries (one per entry of ``like_name``).
 
     >>> as_indices([0, 2, 1], "camera_indices", 3)
     array([0, 2, 1])
-    >>> as_indices(np.array([True, False]), "camera_indices", 3, what="cameras")
+    >>> as_indices(np.array([True, False]), "camera_indices", 3, what="camera")
     Traceback (most recent call last):
     ...
-    ValueError: camera_indices must be integer indices in 0..2 (cameras); got a boolean array: ...
+    ValueError: camera_indices must hold integer indices of cameras (0..2); got a boolean array: ...
     """
     try:
         a = np.asarray(idx)
     except ValueError as exc:
-        raise ValueError(f"{name} must be a 1-D integer array of indices in 0..{n - 1}: {exc}") from None
+        raise ValueError(f"{name} must be a 1-D array of integer indices of {what}s: {exc}") from None
     if a.dtype.kind == "b":
-        raise ValueError(f"{name} must be integer indices in 0..{n - 1} ({what}); got a boolean array: "
+        raise ValueError(f"{name} must hold integer indices of {what}s (0..{n - 1}); got a boolean array: "
                          "np.flatnonzero(mask) gives the indices of a mask")
-    if a.ndim != 1 or (a.size and a.dtype.kind not in "iu"):
-        raise ValueError(f"{name} must be a 1-D integer array of indices in 0..{n - 1} ({what}); got shape "
-                         f"{a.shape}, dtype {a.dtype}")
+    if a.ndim != 1:
+        raise ValueError(f"{name} must be a 1-D array of integers; got shape {a.shape}")
     if length is not None and a.shape[0] != length:
-        raise ValueError(f"{name} has {a.shape[0]} entries but {like_name or 'its partner'} has {length}")
-    if a.size and (a.min() < 0 or a.max() >= n):
-        raise ValueError(f"{name} must hold indices in 0..{n - 1} ({what}); got {int(a.min())}..{int(a.max())}")
-    return a.astype(np.int64)
+        raise ValueError(f"{name} has {a.shape[0]} entries but {like_name} has {length}: one entry of each per "
+                         "observation")
+    if a.size and a.dtype.kind not in "iu":
+        raise ValueError(f"{name} must hold integers (indices of {what}s); got dtype {a.dtype}")
+    a = a.astype(np.int64)
+    bad = np.flatnonzero((a < 0) | (a >= n))
+    if bad.size:
+        held = f" ({holder} has {n})" if holder else ""
+        raise ValueError(f"{name}[{int(bad[0])}] = {int(a[bad[0]])} indexes a missing {what}: "
+                         f"there are {n} {what}s{held}, valid indices 0..{n - 1}; "
+                         f"{bad.size} entries are out of range")
+    return a
 
 
 def as_mask(mask, name, shape):
@@ -597,7 +604,8 @@ def as_cameras(K, R, t):
         raise ValueError("R and t must be finite (NaN rows mark views that are not registered); got inf")
     if not registered.any():
         raise ValueError("no view has a finite pose (R and t are all NaN)")
-    as_rotations(R[registered], "R")
+    R = R.copy()
+    R[registered] = as_rotations(R[registered], "R")
     as_translations(t[registered], "t")
     Ks = as_calibration(K, "K", n_views=len(R))
     return Ks, R, t, registered

@@ -17,11 +17,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.scene import Views
+from ..core.validation import ROTATION_TOL, as_calibration, as_rotation
 
 __all__ = ["read_par", "write_par"]
 
 
-def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol: float = 1e-6) -> Views:
+def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol: float = ROTATION_TOL) -> Views:
     """Read a Middlebury camera file into a :class:`labutils.core.Views` (K, R, t and image paths per view).
 
     Parameters
@@ -30,7 +31,9 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
     check_images : bool
         Check that every image exists beside the file.
     rotation_tol : float
-        Largest entry of ``R Rᵀ - I`` accepted.
+        Largest entry of ``R Rᵀ - I`` accepted (1e-4: the files print 6 digits); an R off by more than round-off
+        is replaced by the nearest rotation, with a one-line
+        :class:`labutils.core.validation.RotationProjectedWarning` naming the file, the line and the correction.
 
     Returns
     -------
@@ -41,7 +44,7 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
     ------
     ValueError
         ``<file>, line N: ...``: a first line that is not a positive image count; a line without a name and 21
-        numbers; a number that is not finite; a K whose last row is not ``0 0 k`` (k ≠ 0) or that is singular;
+        numbers; a number that is not finite; a K whose last row is not ``0 0 k`` (k ≠ 0), that is singular or has a negative focal length;
         an R that is not a rotation; a repeated image name; fewer or more lines than announced; a missing image.
     FileNotFoundError
         If the file itself does not exist.
@@ -84,15 +87,8 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
             raise ValueError(f"{where}: {bad!r} is not a number") from None
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{where}: non-finite number (NaN or inf)")
-        K, R, t = v[:9].reshape(3, 3), v[9:18].reshape(3, 3), v[18:21]
-        if K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] == 0:
-            raise ValueError(f"{where}: the last row of K must be '0 0 k' with k != 0; got {K[2].tolist()}")
-        K = K / K[2, 2]
-        if abs(np.linalg.det(K)) <= 1e-12 * np.abs(K).max() ** 3:
-            raise ValueError(f"{where}: K is singular")
-        if np.abs(R @ R.T - np.eye(3)).max() > rotation_tol or np.linalg.det(R) < 0:
-            raise ValueError(f"{where}: R is not a rotation (orthonormal with det +1): max |R Rᵀ - I| = "
-                             f"{np.abs(R @ R.T - np.eye(3)).max():.2g}, det R = {np.linalg.det(R):.3g}")
+        K = as_calibration(v[:9].reshape(3, 3), f"{where}: K")
+        R, t = as_rotation(v[9:18].reshape(3, 3), f"{where}: R", tol=rotation_tol), v[18:21]
         if tok[0] in names:
             raise ValueError(f"{where}: image {tok[0]} is listed twice (also on line {names[tok[0]]})")
         names[tok[0]] = k

@@ -26,7 +26,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 from numpy.typing import ArrayLike
 
-from ..core.validation import as_array, as_calibration, as_positive, as_rotations, as_tracks
+from ..core.validation import as_array, as_calibration, as_mask, as_positive, as_rotations, as_tracks
 from .rotation_averaging import as_pairs, as_weights
 
 
@@ -63,10 +63,7 @@ def _inputs(tracks, K, R, mask):
     if mask is None:
         use = seen.copy()
     else:
-        m = as_array(mask, "mask", f"({V}, {T})")
-        if m.shape != (V, T) or not np.all((m == 0) | (m == 1)):
-            raise ValueError(f"mask must be a boolean array of shape ({V}, {T}) like tracks[..., 0]; got {m.shape}")
-        use = m.astype(bool) & seen
+        use = as_mask(mask, "mask", (V, T)) & seen
     use[~have] = False
     return tracks, Ks, R, have, use
 

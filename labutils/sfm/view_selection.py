@@ -26,7 +26,7 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.validation import as_array, as_calibration, as_count, as_points, as_tracks
+from ..core.validation import as_array, as_calibration, as_count, as_mask, as_points, as_tracks
 from ..pose.pnp import pose_covariance  # noqa: F401  (re-exported: what the scores stand in for; defined beside pose_jacobian)
 from .initial_pair import two_view_reconstruction
 
@@ -117,12 +117,8 @@ def observation_extent(tracks: ArrayLike) -> np.ndarray:
 def _check(tracks, visible, registered, order):
     tracks = as_tracks(tracks)
     V, T = tracks.shape[:2]
-    vis = as_array(visible, "visible", f"({V}, {T})")
-    if vis.shape != (V, T) or not np.all((vis == 0) | (vis == 1)):
-        raise ValueError(f"visible must be a boolean array of shape ({V}, {T}) like tracks[..., 0]; got {vis.shape}")
-    reg = as_array(registered, "registered", f"({V},)")
-    if reg.shape != (V,) or not np.all((reg == 0) | (reg == 1)):
-        raise ValueError(f"registered must be a boolean array of shape ({V},); got {reg.shape}")
+    vis = as_mask(visible, "visible", (V, T))
+    reg = as_mask(registered, "registered", (V,))
     order = [int(v) for v in order]
     if any(not 0 <= v < V for v in order):
         raise ValueError(f"order must list views in 0..{V - 1}; got {order}")

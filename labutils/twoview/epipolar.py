@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike
 from ..core.geometry import rotation_from_angle_axis, skew
 from ..core.lm import DenseLinearisation, minimise
 from ..core.ransac import ransac
-from ..core.validation import as_count, as_matrix, as_points, as_positive, as_rng
+from ..core.validation import as_count, as_fundamental, as_points, as_positive, as_rng
 
 H_TEST_MIN_POINTS = 50        # the homography-vs-F degeneracy test needs this many correspondences
 
@@ -198,8 +198,13 @@ def sampson_distance(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     >>> sampson_distance(F, [[0., 0.]], [[5., 2.]])
     array([1.41421356])
     """
-    F = as_matrix(F, "F", (3, 3))
+    F = as_fundamental(F, "F")[0]
     x1, x2 = check_pair(x1, x2, 1)
+    return _sampson(F, x1, x2)
+
+
+def _sampson(F, x1, x2):
+    """:func:`sampson_distance` on checked input (the kernel RANSAC calls on each hypothesis)."""
     x1_h = np.hstack([x1, np.ones((len(x1), 1))])
     x2_h = np.hstack([x2, np.ones((len(x2), 1))])
     Fx1 = x1_h @ F.T
@@ -695,7 +700,7 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
     threshold_px = as_positive(threshold_px, "threshold_px")
     refits = as_count(refits, "refits", 0)
     F, inliers, _ = ransac(len(x1), 7, lambda idx: _seven_point(x1[idx], x2[idx]),
-                           lambda F: sampson_distance(F, x1, x2), threshold_px, rng=rng,
+                           lambda F: _sampson(F, x1, x2), threshold_px, rng=rng,
                            confidence=confidence, max_iter=max_iter)
     tested = None
     for _ in range(refits):

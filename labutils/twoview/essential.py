@@ -7,7 +7,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
-from ..core.validation import as_calibration, as_matrix, as_rotation
+from ..core.validation import as_calibration, as_essential, as_fundamental, as_matrix, as_rotation
 from .epipolar import canonical_sign, check_pair, transform_points
 from .triangulation import triangulate
 
@@ -58,7 +58,7 @@ def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np
     >>> np.linalg.svd(essential_from_fundamental(F, K, K))[1].round(9)
     array([1., 1., 0.])
     """
-    F = as_matrix(F, "F", (3, 3))
+    F = as_fundamental(F, "F")[0]
     K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
     U, s, Vt = np.linalg.svd(K2.T @ F @ K1)
     if s[1] <= 1e-12 * s[0]:
@@ -76,7 +76,8 @@ def decompose_essential(E: ArrayLike) -> list:
     Parameters
     ----------
     E : (3, 3) array_like
-        Essential matrix (any scale; projected onto the manifold by the SVD).
+        Essential matrix (any scale): singular values (s, s, 0) within 1e-5 relative
+        (:func:`labutils.core.validation.as_essential`).
 
     Returns
     -------
@@ -86,7 +87,7 @@ def decompose_essential(E: ArrayLike) -> list:
     Raises
     ------
     ValueError
-        If E is not finite, not 3×3, or has rank < 2.
+        If E is not finite, not 3×3, or not essential (``E = I``, rank < 2, unequal singular values).
 
     Examples
     --------
@@ -96,7 +97,7 @@ def decompose_essential(E: ArrayLike) -> list:
     >>> len(poses), any(np.allclose(R, R0) and np.allclose(t, t0) for R, t in poses)
     (4, True)
     """
-    E = as_matrix(E, "E", (3, 3))
+    E = as_essential(E, "E")
     U, s, Vt = np.linalg.svd(E)
     if s[0] == 0 or s[1] <= 1e-12 * s[0]:
         raise ValueError(f"E has rank < 2 (singular values {s}): not an essential matrix")
