@@ -165,8 +165,9 @@ def as_rotations(R, name="R", tol=ROTATION_TOL, n=None, like_name=None):
     ...     warnings.simplefilter("always")
     ...     c, s = np.cos(0.3), np.sin(0.3)
     ...     R = as_rotations(np.round([[[c, 0, s], [0, 1, 0], [-s, 0, c]]], 6))      # printed to 6 digits
-    >>> print(caught[0].message)
-    R is 1.1e-06 off a rotation (within the tolerance 0.0001): replaced by the nearest rotation, largest correction 5e-07
+    >>> print(caught[0].message)  # doctest: +NORMALIZE_WHITESPACE
+    R is 1.1e-06 off a rotation (within the tolerance 0.0001): replaced by the nearest rotation,
+    largest correction 5e-07
     >>> float(np.abs(R[0] @ R[0].T - np.eye(3)).max()) < 1e-15
     True
     """

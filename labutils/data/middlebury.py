@@ -44,7 +44,8 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
     ------
     ValueError
         ``<file>, line N: ...``: a first line that is not a positive image count; a line without a name and 21
-        numbers; a number that is not finite; a K whose last row is not ``0 0 k`` (k ≠ 0), that is singular or has a negative focal length;
+        numbers; a number that is not finite; a K whose last row is not ``0 0 k`` (k ≠ 0), that is singular
+        or has a negative focal length;
         an R that is not a rotation; a repeated image name; fewer or more lines than announced; a missing image.
     FileNotFoundError
         If the file itself does not exist.

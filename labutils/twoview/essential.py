@@ -8,7 +8,7 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
 from ..core.validation import as_calibration, as_essential, as_fundamental, as_matrix, as_rotation
-from .epipolar import canonical_sign, check_pair, transform_points
+from .epipolar import _canonical_sign, _transform_points, check_pair
 from .triangulation import triangulate
 
 
@@ -30,7 +30,7 @@ def fundamental_from_pose(K1: ArrayLike, K2: ArrayLike, R: ArrayLike, t: ArrayLi
     t = as_matrix(t, "t", (3,))
     if not np.linalg.norm(t) > 0:
         raise ValueError("t is zero: with no baseline the two views are related by a homography and F is not defined")
-    return canonical_sign(np.linalg.inv(K2).T @ skew(t) @ R @ np.linalg.inv(K1))
+    return _canonical_sign(np.linalg.inv(K2).T @ skew(t) @ R @ np.linalg.inv(K1))
 
 
 def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np.ndarray:
@@ -148,7 +148,7 @@ def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike,
     """
     x1, x2 = check_pair(x1, x2, 1)
     K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
-    y1, y2 = transform_points(np.linalg.inv(K1), x1), transform_points(np.linalg.inv(K2), x2)
+    y1, y2 = _transform_points(np.linalg.inv(K1), x1), _transform_points(np.linalg.inv(K2), x2)
     return _cheirality_counts(decompose_essential(E), y1, y2)
 
 
