@@ -9,7 +9,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike
 
-from .validation import as_array, as_calibration, as_matrix, as_points, as_rotation, as_rotations
+from .validation import as_array, as_calibration, as_camera_matrix, as_matrix, as_points, as_rotation, as_rotations
 
 
 def homogeneous(x: ArrayLike) -> np.ndarray:
@@ -298,7 +298,7 @@ def project(P: ArrayLike, X: ArrayLike) -> np.ndarray:
     ...
     ValueError: X must have shape (N, 3) (points as rows); got shape (1, 2)
     """
-    P = as_matrix(P, "P", (3, 4))
+    P = as_camera_matrix(P, "P")
     X = as_points(X, "X", dim=3)
     x_h = X @ P[:, :3].T + P[:, 3]
     bad = np.flatnonzero(x_h[:, 2] == 0)

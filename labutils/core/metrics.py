@@ -163,7 +163,7 @@ def rms(r: ArrayLike) -> float:
     >>> rms([3.0, 4.0]) ** 2
     12.5
     """
-    r = np.asarray(r, float)
+    r = as_array(r, "r", "(any shape)")
     if r.size == 0 or not np.all(np.isfinite(r)):
         raise ValueError(f"r must be a non-empty array of finite numbers; got shape {r.shape}"
                          + ("" if r.size == 0 else " with NaN or inf"))

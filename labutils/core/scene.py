@@ -57,6 +57,10 @@ def nan_tracks(raw, missing=-1):
     if not (isinstance(missing, (int, float, np.integer, np.floating)) and not isinstance(missing, bool)
             and np.isfinite(missing)):
         raise ValueError(f"missing must be a finite number (the marker of an unseen observation); got {missing!r}")
+    half = np.isnan(x[..., 0]) != np.isnan(x[..., 1])
+    if half.any():
+        v, k = np.argwhere(half)[0]
+        raise ValueError(f"raw[{v}, {k}] has one NaN coordinate: an observation is two numbers or unseen")
     x[np.any(x == missing, axis=-1)] = np.nan
     return x
 

@@ -416,8 +416,9 @@ def as_indices(idx, name, n, *, length=None, like_name="camera_indices", what="i
     return a
 
 
-def as_mask(mask, name, shape):
-    """A boolean mask of ``shape``: a bool array, or numbers that are all 0 or 1; ``ValueError`` otherwise.
+def as_mask(mask, name, shape, like=None):
+    """A boolean mask of ``shape``: a bool array, or numbers that are all 0 or 1; ``ValueError`` otherwise (naming
+    ``like``, the argument(s) the shape comes from, when given).
 
     >>> as_mask([[1, 0]], "visible", (1, 2))
     array([[ True, False]])
@@ -428,7 +429,8 @@ def as_mask(mask, name, shape):
         raise ValueError(f"{name} must be a boolean array of shape {shape}: {exc}") from None
     if a.shape != tuple(shape) or a.dtype.kind not in "biuf" or (a.dtype.kind != "b" and a.size and
                                                                   not np.all((a == 0) | (a == 1))):
-        raise ValueError(f"{name} must be a boolean array of shape {tuple(shape)}; got shape {a.shape}, "
+        match = f" (to match {like})" if like else ""
+        raise ValueError(f"{name} must be a boolean array of shape {tuple(shape)}{match}; got shape {a.shape}, "
                          f"dtype {a.dtype}")
     return a.astype(bool)
 

@@ -10,6 +10,7 @@ with ``P = K [R | t]`` mapping world points to pixels (origin top-left, x right,
 Image names are relative to the file's folder.
 """
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.scene import Views
-from ..core.validation import ROTATION_TOL, as_calibration, as_rotation
+from ..core.validation import ROTATION_TOL, RotationProjectedWarning, as_calibration, as_rotation
 
 __all__ = ["read_par", "write_par"]
 
@@ -32,8 +33,9 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
         Check that every image exists beside the file.
     rotation_tol : float
         Largest entry of ``R Rᵀ - I`` accepted (1e-4: the files print 6 digits); an R off by more than round-off
-        is replaced by the nearest rotation, with a one-line
-        :class:`labutils.core.validation.RotationProjectedWarning` naming the file, the line and the correction.
+        is replaced by the nearest rotation; one one-line
+        :class:`labutils.core.validation.RotationProjectedWarning` for the file reports how many and the largest
+        correction (and its line).
 
     Returns
     -------
@@ -70,7 +72,7 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
         raise ValueError(f"{path}, line 1: expected the number of images (a positive integer); "
                          f"got {lines[0][:60] if lines else 'an empty file'!r}")
     n = int(first[0])
-    Ks, Rs, ts, names, paths = [], [], [], {}, []
+    Ks, Rs, ts, names, paths, projected = [], [], [], {}, [], []
     for k, line in enumerate(lines[1:], 2):
         tok = line.split()
         if not tok:
@@ -89,7 +91,12 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{where}: non-finite number (NaN or inf)")
         K = as_calibration(v[:9].reshape(3, 3), f"{where}: K")
-        R, t = as_rotation(v[9:18].reshape(3, 3), f"{where}: R", tol=rotation_tol), v[18:21]
+        with warnings.catch_warnings():                  # one report for the file, below
+            warnings.simplefilter("ignore", RotationProjectedWarning)
+            R, t = as_rotation(v[9:18].reshape(3, 3), f"{where}: R", tol=rotation_tol), v[18:21]
+        change = np.abs(R - v[9:18].reshape(3, 3)).max()
+        if change > 0:
+            projected.append((change, k))
         if tok[0] in names:
             raise ValueError(f"{where}: image {tok[0]} is listed twice (also on line {names[tok[0]]})")
         names[tok[0]] = k
@@ -102,6 +109,12 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
         paths.append(img)
     if len(paths) < n:
         raise ValueError(f"{path}, line 1: {n} images announced; the file lists {len(paths)}")
+    if projected:
+        change, k = max(projected)
+        warnings.warn(f"{path}: {len(projected)} of {n} rotations are off SO(3) by round-off (within "
+                      f"{rotation_tol:g}): replaced by the nearest rotations, largest correction {change:.2g} "
+                      f"(line {k})",
+                      RotationProjectedWarning, stacklevel=2)
     return Views(name=path.stem, K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths)
 
 

@@ -63,7 +63,7 @@ def _inputs(tracks, K, R, mask):
     if mask is None:
         use = seen.copy()
     else:
-        use = as_mask(mask, "mask", (V, T)) & seen
+        use = as_mask(mask, "mask", (V, T), like="tracks") & seen
     use[~have] = False
     return tracks, Ks, R, have, use
 

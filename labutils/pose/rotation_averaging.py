@@ -177,6 +177,8 @@ def aligned_rotation_errors_deg(R_est: ArrayLike, R_true: ArrayLike) -> np.ndarr
     if R_est.shape != R_true.shape:
         raise ValueError(f"R_est must have shape {R_true.shape} like R_true (NaN rows for views without an estimate); "
                          f"got {R_est.shape}")
+    if np.isinf(R_est).any():
+        raise ValueError("R_est has infinite entries (NaN rows mark views without an estimate)")
     ok = np.isfinite(R_est).all((1, 2))
     if not ok.any():
         raise ValueError("R_est has no finite rotation")

@@ -118,7 +118,7 @@ def masked_reprojection_errors(K, R, t, X, tracks, mask):
     """
     tracks = as_tracks(tracks)
     V, N = tracks.shape[:2]
-    mask = as_mask(mask, "mask", (V, N))
+    mask = as_mask(mask, "mask", (V, N), like="tracks")
     unseen = mask & ~np.all(np.isfinite(tracks), axis=-1)
     if unseen.any():
         v, k = np.argwhere(unseen)[0]

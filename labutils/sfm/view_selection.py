@@ -117,8 +117,8 @@ def observation_extent(tracks: ArrayLike) -> np.ndarray:
 def _check(tracks, visible, registered, order):
     tracks = as_tracks(tracks)
     V, T = tracks.shape[:2]
-    vis = as_mask(visible, "visible", (V, T))
-    reg = as_mask(registered, "registered", (V,))
+    vis = as_mask(visible, "visible", (V, T), like="tracks")
+    reg = as_mask(registered, "registered", (V,), like="tracks")
     order = [int(v) for v in order]
     if any(not 0 <= v < V for v in order):
         raise ValueError(f"order must list views in 0..{V - 1}; got {order}")

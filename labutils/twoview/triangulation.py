@@ -354,7 +354,7 @@ def ray_angles_deg(C: ArrayLike, X: ArrayLike, mask: ArrayLike) -> np.ndarray:
         raise ValueError(f"C must have shape (V, 3) (one centre per row); got shape {C.shape}")
     if X.ndim != 2 or X.shape[1] != 3:
         raise ValueError(f"X must have shape (T, 3) (points as rows); got shape {X.shape}")
-    mask = as_mask(mask, "mask", (len(C), len(X)))
+    mask = as_mask(mask, "mask", (len(C), len(X)), like="the rows of C and X")
     for name, a, used in (("C", C, mask.any(axis=1)), ("X", X, mask.any(axis=0))):
         bad = np.flatnonzero(used & ~np.all(np.isfinite(a), axis=1))
         if bad.size:
@@ -509,7 +509,7 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     R = R.copy()
     R[views] = as_rotations(R[views], "R[views]")
     as_translations(t[views], "t[views]")
-    mask = as_mask(mask, "mask", (V, N))
+    mask = as_mask(mask, "mask", (V, N), like="tracks")
     threshold_px = as_positive(threshold_px, "threshold_px", allow_inf=True)
     min_angle_deg = as_positive(min_angle_deg, "min_angle_deg", allow_zero=True)
     use = np.zeros((V, N), bool)

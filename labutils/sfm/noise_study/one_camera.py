@@ -10,6 +10,7 @@ import numpy as np
 
 from ...core.geometry import angle_axis_from_rotation
 from ...core.validation import (
+    as_array,
     as_calibration,
     as_count,
     as_matrix,
@@ -71,7 +72,7 @@ def nees(errors, cov):
     >>> nees([[1.0, 0.0], [0.0, 2.0]], np.diag([1.0, 4.0]))
     array([1., 1.])
     """
-    cov = np.asarray(cov, float)
+    cov = as_array(cov, "cov", "(d, d)")
     if cov.ndim != 2 or cov.shape[0] != cov.shape[1] or not np.all(np.isfinite(cov)):
         raise ValueError(f"cov must be a finite square (d, d) matrix; got shape {cov.shape}")
     e = as_points(errors, "errors", dim=cov.shape[0])

@@ -13,7 +13,7 @@ import numpy as np
 from ...bundle.adjust import bundle_adjust
 from ...core.metrics import pose_errors
 from ...core.scene import observations
-from ...core.validation import as_calibration, as_fraction, as_positive, as_rng, as_tracks
+from ...core.validation import as_array, as_calibration, as_fraction, as_positive, as_rng, as_tracks
 from ...pose.pnp import pnp_ransac
 from ...twoview.triangulation import triangulate_tracks
 from ..initial_pair import two_view_reconstruction
@@ -231,7 +231,7 @@ def loglog_slope(sigmas, errors):
     >>> round(loglog_slope([0.5, 1, 2], [0.1, 0.2, 0.4]), 12)
     1.0
     """
-    s, e = np.asarray(sigmas, float), np.asarray(errors, float)
+    s, e = as_array(sigmas, "sigmas", "(n,)"), as_array(errors, "errors", "(n,)")
     if s.shape != e.shape or s.ndim != 1 or s.size < 2:
         raise ValueError(f"sigmas and errors must be two 1-D arrays of the same length >= 2; got shapes {s.shape} "
                          f"and {e.shape}")
