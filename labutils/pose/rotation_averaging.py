@@ -348,6 +348,8 @@ def refine_rotations(R0: ArrayLike, pairs: ArrayLike, R_rel: ArrayLike, weights:
     """
     R = as_rotations(R0, "R0").copy()
     V = len(R)
+    if V < 2:
+        raise ValueError(f"R0 must hold the rotations of at least two views; got {V}")
     pairs, R_rel, w = as_view_graph(pairs, R_rel, V, weights)
     anchor = _as_anchor(anchor, V)
     if loss not in LOSSES:

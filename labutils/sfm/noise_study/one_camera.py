@@ -123,7 +123,10 @@ def one_camera_trials(X, x_true, K, R, t, sigmas, n_trials, *, rng, threshold_si
     R = as_rotation(R, "R")
     t = as_matrix(t, "t", (3,))
     n_trials = as_count(n_trials, "n_trials", 1)
-    sigmas = [as_positive(s, "sigmas") for s in np.atleast_1d(np.asarray(sigmas, float))]
+    sigmas = as_array(sigmas, "sigmas", "(S,)")
+    if sigmas.ndim != 1 or sigmas.size == 0:
+        raise ValueError(f"sigmas must be a non-empty 1-D array of pixel noises; got shape {sigmas.shape}")
+    sigmas = [as_positive(float(s), "sigmas") for s in sigmas]
     out = {}
     for s in sigmas:
         Rs, ts = np.empty((n_trials, 3, 3)), np.empty((n_trials, 3))
