@@ -173,8 +173,12 @@ def angle_axis_from_rotation(R: ArrayLike) -> np.ndarray:
     theta = np.arctan2(sin, cos)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(sin[:, None] > 0, theta[:, None] * v / (2 * sin[:, None]), 0.0)
-    # beyond π/2 the skew part shrinks as sin θ: the axis from the symmetric part, (1 - cos θ) a aᵀ
-    wide = np.flatnonzero(cos < 0)
+        # 0.1 <= θ <= 3: arccos is as accurate, and gives the same bits as before (fits started from it repeat)
+        mid = (cos <= np.cos(0.1)) & (cos >= np.cos(3.0))
+        th = np.arccos(cos[mid])
+        out[mid] = (th / (2 * np.sin(th)))[:, None] * v[mid]
+    # beyond 3 the skew part shrinks as sin θ: the axis from the symmetric part, (1 - cos θ) a aᵀ
+    wide = np.flatnonzero(cos < np.cos(3.0))
     if wide.size:
         S = 0.5 * (Rs[wide] + np.swapaxes(Rs[wide], 1, 2)) - cos[wide, None, None] * np.eye(3)
         j = np.argmax(np.diagonal(S, axis1=1, axis2=2), axis=1)

@@ -232,8 +232,10 @@ def next_view(visible_points, registered, skip=(), scores=None, min_points=1):
     2
     """
     counts = as_array(visible_points, "visible_points", "(V,)")
-    if counts.ndim != 1 or not np.all(counts == np.round(counts)) or np.any(counts < 0):
-        raise ValueError(f"visible_points must be (V,) counts, integers >= 0 (one per view); got {counts.tolist()}")
+    if counts.ndim != 1:
+        raise ValueError(f"visible_points must have shape (V,) (one count per view); got shape {counts.shape}")
+    if not np.all(counts == np.round(counts)) or np.any(counts < 0):
+        raise ValueError(f"visible_points must be counts, integers >= 0 (one per view); got {counts.tolist()}")
     min_points = as_count(min_points, "min_points", 1)
     V = len(counts)
     registered = np.asarray(registered)
