@@ -182,6 +182,17 @@ VALID = {
 
 # The helpers the notebooks import from the stage packages (issue 21), as "module:function"
 C_S = lu.camera_center(S.R, S.t)
+MASK_A = np.zeros((40, 40), bool)
+MASK_A[5:25, 5:25] = True
+MASK_B = np.zeros((40, 40), bool)
+MASK_B[12:30, 10:28] = True
+TETRA = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+PATCH = np.random.default_rng(8).uniform(0, 255, (5, 5))
+STEREO_R = np.random.default_rng(9).uniform(0, 255, (20, 40))
+STEREO_L = np.roll(STEREO_R, 3, axis=1)
+PB = np.stack([lu.P_from_KRt(KB, R, t) for R, t in zip(RB, TB)])
+VIS_B = np.ones((3, len(BALL)), bool)
 T_PAIRS = np.stack([lu.relative_pose(S.R[i], S.t[i], S.R[j], S.t[j])[1] for i, j in PAIRS])
 REC_T = lu.incremental_sfm(T.tracks, T.K, rng=np.random.default_rng(0))
 HELPERS = {
@@ -233,6 +244,27 @@ HELPERS = {
     "labutils.calibrate:undistort_image": ((IMG, KB, DIST), {}),
     "labutils.calibrate:rectify_image": ((IMG, KB, DIST, np.eye(3)), {}),
     "labutils.calibrate:synthetic_board_views": ((3, 0.1), {"rng": "RNG", "board": (5, 4)}),
+    # the model stage: meshes, masks, colours, stereo
+    "labutils.model:mask_iou": ((MASK_A, MASK_B), {}),
+    "labutils.model:clean_mask": ((MASK_A,), {"max_hole": 0.01}),
+    "labutils.model:mesh_volume": ((TETRA, TETRA_F), {}),
+    "labutils.model:vertex_normals": ((TETRA, TETRA_F), {}),
+    "labutils.model:edge_contrast": ((np.array([[0.0, 0, 0], [255, 255, 255], [0, 0, 0], [9, 9, 9]]), TETRA_F), {}),
+    "labutils.model:scale_intrinsics": ((KB, 0.5), {}),
+    "labutils.model:sample_image": ((IMG, np.array([[5.5, 6.0], [20.0, 30.0], [1.0, 2.0]])), {}),
+    "labutils.model:zncc": ((PATCH, 3 * PATCH + 7), {}),
+    "labutils.model:zncc_volume": ((STEREO_L, STEREO_R, np.array([2, 3, 4])), {"window": 5}),
+    "labutils.model:disparity_plane_sweep": ((STEREO_L, STEREO_R, 0, 6), {"window": 5}),
+    "labutils.model:left_right_check": ((np.array([[2.0, 2.0, 2.0, 2.0, 2.0]]), np.array([[2.0, 2.0, 5.0, 2.0, 2.0]])),
+                                        {}),
+    "labutils.model:local_pca": ((BALL,), {"k": 8}),
+    "labutils.model:inside_silhouette": ((BALL, PB[0], MASK_B), {}),
+    "labutils.model:render_silhouette": ((MESH.vertices, MESH.faces, PB[0], (40, 40)), {}),
+    "labutils.model:silhouette_ious": ((MESH.vertices, MESH.faces, np.stack([MASK_B] * 3), PB), {}),
+    "labutils.model:facing_fractions": ((BALL, BALL, RB, TB, VIS_B), {}),
+    "labutils.model:orient_normals": ((BALL, BALL, RB, TB, VIS_B), {}),
+    "labutils.model:most_frontal_view": ((BALL, BALL, lu.camera_center(RB, TB), VIS_B), {}),
+    "labutils.model:point_colors": ((BALL, [IMG] * 3, KB, RB, TB, VIS_B), {}),
 }
 VALID.update(HELPERS)
 
@@ -256,13 +288,10 @@ NOT_YET_SWEPT = {
     "labutils.sfm": "global_sfm view_graph",
     "labutils.calibrate": "detect_corners load_stereo_chessboard render_board_views view_influence",
     "labutils.match": "render_corner",
-    "labutils.model": "bounding_box_from_silhouettes carve choose_threshold clean_mask cloud_from_reconstruction "
-                      "colour_distance depth_in_map depth_map_from_disparity disparity_plane_sweep disparity_range "
-                      "edge_contrast facing_fractions fuse_depth_maps held_out_error inside_silhouette "
-                      "left_right_check local_pca make_layered_pair make_snowman make_textured_scene "
-                      "make_textured_spheres mask_iou mesh_volume most_frontal_view orient_normals point_colors "
-                      "rectify_pair render_silhouette ring_pairs sample_image scale_intrinsics silhouette_ious "
-                      "stereo_depth_map surface_mesh vertex_normals zncc zncc_volume",
+    "labutils.model": "bounding_box_from_silhouettes carve choose_threshold cloud_from_reconstruction "
+                      "colour_distance depth_in_map depth_map_from_disparity disparity_range fuse_depth_maps "
+                      "held_out_error make_layered_pair make_snowman make_textured_scene make_textured_spheres "
+                      "rectify_pair ring_pairs stereo_depth_map surface_mesh",
 }
 
 
@@ -396,16 +425,54 @@ ACCEPTED.update({
     ("labutils.calibrate:rectify_image", "dist", "drop_column"):
         "4 coefficients mean k3 = 0 (documented, as in OpenCV)",
     ("labutils.calibrate:synthetic_board_views", "noise_px", "zero"): "noise-free views (as in the docstring)",
+    ("labutils.model:clean_mask", "mask", "drop_column"): "a mask of another size is a mask",
+    ("labutils.model:clean_mask", "mask", "one_row"): "a mask one pixel high is a mask",
+    ("labutils.model:clean_mask", "max_hole", "zero"): "0 fills no hole (the strictest setting)",
+    ("labutils.model:mesh_volume", "faces", "one_row"):
+        "the signed volume of the cone over one triangle from the origin: the formula, summed over a closed "
+        "mesh, is its volume",
+    ("labutils.model:vertex_normals", "faces", "one_row"):
+        "one triangle is a mesh (the vertices on no face get the zero normal)",
+    ("labutils.model:edge_contrast", "faces", "one_row"): "one triangle is a mesh",
+    ("labutils.model:sample_image", "x", "one_row"): "one point",
+    ("labutils.model:sample_image", "x", "empty"): "no points in, no samples out",
+    ("labutils.model:zncc_volume", "disparities", "drop_column"): "fewer disparities to try",
+    ("labutils.model:zncc_volume", "disparities", "one_row"): "one disparity to try",
+    ("labutils.model:disparity_plane_sweep", "d_min", "zero"): "disparities from 0 (the docstring's example)",
+    ("labutils.model:disparity_plane_sweep", "d_min", "negative"):
+        "negative disparities are valid (points beyond the convergence of a rectified pair)",
+    ("labutils.model:left_right_check", "d_left", "nan"): "NaN marks a pixel without a disparity (documented)",
+    ("labutils.model:left_right_check", "d_right", "nan"): "NaN marks a pixel without a disparity (documented)",
+    ("labutils.model:inside_silhouette", "X", "one_row"): "one point",
+    ("labutils.model:inside_silhouette", "X", "empty"): "no points in, no answers out",
+    ("labutils.model:inside_silhouette", "mask", "drop_column"):
+        "a mask of another size is a mask (points outside it are outside)",
+    ("labutils.model:inside_silhouette", "mask", "one_row"): "a mask one pixel high is a mask",
+    ("labutils.model:render_silhouette", "faces", "one_row"): "one triangle is a mesh",
+    ("labutils.model:render_silhouette", "faces", "empty"): "no triangles: an empty silhouette",
+    ("labutils.model:silhouette_ious", "faces", "one_row"): "one triangle is a mesh",
+    ("labutils.model:silhouette_ious", "faces", "empty"): "no triangles: empty silhouettes, IoU 0",
+    ("labutils.model:silhouette_ious", "masks", "drop_column"):
+        "masks of another size: the silhouettes are rendered at their size",
 })
 NAN_IS_DOCUMENTED = {("camera_center", "R", "nan"), ("camera_center", "t", "nan"),
                      ("labutils.pose:aligned_rotation_errors_deg", "R_est", "nan"),
                      ("labutils.core.scene:nan_tracks", "raw", "one_row"),
                      ("labutils.sfm:reconstruct_without_ba", "tracks", "nan"),            # NaN: views not registered
                      ("labutils.sfm:reconstruct_without_ba", "order", "drop_column"),
-                     ("labutils.sfm:refine_reconstruction", "tracks", "nan")}
+                     ("labutils.sfm:refine_reconstruction", "tracks", "nan"),
+                     # NaN where the window does not fit or no disparity is found (documented)
+                     ("labutils.model:zncc_volume", "disparities", "drop_column"),
+                     ("labutils.model:zncc_volume", "disparities", "one_row"),
+                     ("labutils.model:disparity_plane_sweep", "d_min", "negative"),
+                     ("labutils.model:disparity_plane_sweep", "d_min", "zero")}
 
 # where a message rightly names the argument through the one it must agree with
-ALIASES = {"bundle_adjust": {"X": "point_indices"}}
+ALIASES = {"bundle_adjust": {"X": "point_indices"},
+           "labutils.model:mask_iou": {"a": r"\bb has shape .*; expected"},                # b must match a
+           "labutils.model:edge_contrast": {"colors": r"\bvertices\b"},                   # one colour per vertex
+           "labutils.model:render_silhouette": {"vertices": "faces hold vertex indices"},
+           "labutils.model:silhouette_ious": {"vertices": "faces hold vertex indices"}}
 
 
 K_ARGS = {"K", "K1", "K2", "Ks", "K_init", "K_new"}

@@ -38,7 +38,10 @@ def _as_image(image, name="image"):
 
 
 def _as_mask(mask, name="mask", shape=None):
-    a = np.asarray(mask)
+    try:
+        a = np.asarray(mask)
+    except ValueError:
+        raise ValueError(f"{name} must be a (H, W) boolean mask; got a ragged list") from None
     if a.ndim != 2 or a.size == 0 or (a.dtype != bool and not (a.dtype.kind in "iu" and a.max() <= 1
                                                                 and a.min() >= 0)):
         raise ValueError(f"{name} must be a (H, W) boolean mask with H, W > 0; got shape {a.shape} and dtype {a.dtype}")

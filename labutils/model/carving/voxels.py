@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ...core.geometry import KRt_from_P
-from ...core.validation import as_matrix, as_points
+from ...core.validation import as_array, as_matrix, as_points
 from .silhouettes import _as_mask, _as_number, signed_distance_map
 
 __all__ = ["VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve", "bounding_box_from_silhouettes"]
@@ -99,7 +99,7 @@ class Carving:
 
 
 def _as_cameras(P, name="P"):
-    P = np.asarray(P, dtype=float)
+    P = as_array(P, name, "(V, 3, 4)")
     if P.ndim == 2:
         P = P[None]
     if P.ndim != 3 or P.shape[1:] != (3, 4):
@@ -185,7 +185,7 @@ def inside_silhouette(X: ArrayLike, P: ArrayLike, mask: ArrayLike) -> np.ndarray
 def _check_masks(masks, n_views):
     masks = list(masks)
     if len(masks) != n_views:
-        raise ValueError(f"masks has {len(masks)} silhouettes for {n_views} cameras: one per view")
+        raise ValueError(f"masks has {len(masks)} silhouettes for the {n_views} cameras of P: one per view")
     return [_as_mask(m, f"masks[{i}]") for i, m in enumerate(masks)]
 
 
