@@ -472,7 +472,8 @@ ALIASES = {"bundle_adjust": {"X": "point_indices"},
            "labutils.model:mask_iou": {"a": r"\bb has shape .*; expected"},                # b must match a
            "labutils.model:edge_contrast": {"colors": r"\bvertices\b"},                   # one colour per vertex
            "labutils.model:render_silhouette": {"vertices": "faces hold vertex indices"},
-           "labutils.model:silhouette_ious": {"vertices": "faces hold vertex indices"}}
+           "labutils.model:silhouette_ious": {"vertices": "faces hold vertex indices",
+                                              "P": r"masks has \d+ silhouettes for \d+ cameras"}}
 
 
 K_ARGS = {"K", "K1", "K2", "Ks", "K_init", "K_new"}

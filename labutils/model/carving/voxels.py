@@ -185,7 +185,7 @@ def inside_silhouette(X: ArrayLike, P: ArrayLike, mask: ArrayLike) -> np.ndarray
 def _check_masks(masks, n_views):
     masks = list(masks)
     if len(masks) != n_views:
-        raise ValueError(f"masks has {len(masks)} silhouettes for the {n_views} cameras of P: one per view")
+        raise ValueError(f"masks has {len(masks)} silhouettes for {n_views} cameras: one per view")
     return [_as_mask(m, f"masks[{i}]") for i, m in enumerate(masks)]
 
 
