@@ -193,6 +193,12 @@ STEREO_R = np.random.default_rng(9).uniform(0, 255, (20, 40))
 STEREO_L = np.roll(STEREO_R, 3, axis=1)
 PB = np.stack([lu.P_from_KRt(KB, R, t) for R, t in zip(RB, TB)])
 VIS_B = np.ones((3, len(BALL)), bool)
+DEPTH_MAP = importlib.import_module("labutils.model").DepthMap(np.full((4, 6), 2.0), np.array(
+    [[10.0, 0, 2.5], [0, 10, 1.5], [0, 0, 1]]), np.eye(3), np.zeros(3))
+KS = np.array([[200.0, 0, 79.5], [0, 200, 59.5], [0, 0, 1]])
+STEREO_IMG = np.zeros((120, 160), np.uint8)
+(RS1, TS1), (RS2, TS2) = lu.core.look_at([0.2, -3, 0], [0, 0, 0]), lu.core.look_at([-0.2, -3, 0], [0, 0, 0])
+RECT_PAIR = importlib.import_module("labutils.model").rectify_pair(STEREO_IMG, STEREO_IMG, KS, RS1, TS1, KS, RS2, TS2)
 T_PAIRS = np.stack([lu.relative_pose(S.R[i], S.t[i], S.R[j], S.t[j])[1] for i, j in PAIRS])
 REC_T = lu.incremental_sfm(T.tracks, T.K, rng=np.random.default_rng(0))
 HELPERS = {
@@ -265,6 +271,12 @@ HELPERS = {
     "labutils.model:orient_normals": ((BALL, BALL, RB, TB, VIS_B), {}),
     "labutils.model:most_frontal_view": ((BALL, BALL, lu.camera_center(RB, TB), VIS_B), {}),
     "labutils.model:point_colors": ((BALL, [IMG] * 3, KB, RB, TB, VIS_B), {}),
+    "labutils.model:ring_pairs": ((RB, TB, np.zeros(3)), {"min_angle_deg": 1.0, "max_angle_deg": 150.0}),
+    "labutils.model:colour_distance": ((IMG, BG), {}),
+    "labutils.model:cloud_from_reconstruction": ((REC_T,), {"k": 8}),
+    "labutils.model:depth_in_map": ((np.array([[0.0, 0.0, 2.1], [0.5, 0.0, 1.0]]), DEPTH_MAP), {}),
+    "labutils.model:rectify_pair": ((STEREO_IMG, STEREO_IMG, KS, RS1, TS1, KS, RS2, TS2), {}),
+    "labutils.model:disparity_range": ((RECT_PAIR, np.array([[0.0, -0.5, 0.0], [0.0, 0.5, 0.0]])), {}),
 }
 VALID.update(HELPERS)
 
@@ -288,10 +300,9 @@ NOT_YET_SWEPT = {
     "labutils.sfm": "global_sfm view_graph",
     "labutils.calibrate": "detect_corners load_stereo_chessboard render_board_views view_influence",
     "labutils.match": "render_corner",
-    "labutils.model": "bounding_box_from_silhouettes carve choose_threshold cloud_from_reconstruction "
-                      "colour_distance depth_in_map depth_map_from_disparity disparity_range fuse_depth_maps "
-                      "held_out_error make_layered_pair make_snowman make_textured_scene make_textured_spheres "
-                      "rectify_pair ring_pairs stereo_depth_map surface_mesh",
+    "labutils.model": "bounding_box_from_silhouettes carve choose_threshold depth_map_from_disparity "
+                      "fuse_depth_maps held_out_error make_layered_pair make_snowman make_textured_scene "
+                      "make_textured_spheres stereo_depth_map surface_mesh",
 }
 
 
@@ -454,6 +465,11 @@ ACCEPTED.update({
     ("labutils.model:silhouette_ious", "faces", "empty"): "no triangles: empty silhouettes, IoU 0",
     ("labutils.model:silhouette_ious", "masks", "drop_column"):
         "masks of another size: the silhouettes are rendered at their size",
+    ("labutils.model:ring_pairs", "min_angle_deg", "zero"): "no lower bound on the angle between two views",
+    ("labutils.model:colour_distance", "image", "one_row"): "an image one pixel high is an image",
+    ("labutils.model:depth_in_map", "X", "one_row"): "one point",
+    ("labutils.model:depth_in_map", "X", "empty"): "no points in, no depths out",
+    ("labutils.model:disparity_range", "X", "one_row"): "one point bounds the disparities too (with the margin)",
 })
 NAN_IS_DOCUMENTED = {("camera_center", "R", "nan"), ("camera_center", "t", "nan"),
                      ("labutils.pose:aligned_rotation_errors_deg", "R_est", "nan"),
