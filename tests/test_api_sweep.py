@@ -199,6 +199,10 @@ KS = np.array([[200.0, 0, 79.5], [0, 200, 59.5], [0, 0, 1]])
 STEREO_IMG = np.zeros((120, 160), np.uint8)
 (RS1, TS1), (RS2, TS2) = lu.core.look_at([0.2, -3, 0], [0, 0, 0]), lu.core.look_at([-0.2, -3, 0], [0, 0, 0])
 RECT_PAIR = importlib.import_module("labutils.model").rectify_pair(STEREO_IMG, STEREO_IMG, KS, RS1, TS1, KS, RS2, TS2)
+SNOW = importlib.import_module("labutils.model").make_snowman(4, rng=np.random.default_rng(0), image_size=(64, 48),
+                                                               f=84.0)
+GRID = importlib.import_module("labutils.model").VoxelGrid(np.array([-0.64, -0.64, -0.62]), 0.11, (12, 12, 17))
+CARVING = importlib.import_module("labutils.model").carve(SNOW.masks, SNOW.P, GRID)
 T_PAIRS = np.stack([lu.relative_pose(S.R[i], S.t[i], S.R[j], S.t[j])[1] for i, j in PAIRS])
 REC_T = lu.incremental_sfm(T.tracks, T.K, rng=np.random.default_rng(0))
 HELPERS = {
@@ -277,6 +281,15 @@ HELPERS = {
     "labutils.model:depth_in_map": ((np.array([[0.0, 0.0, 2.1], [0.5, 0.0, 1.0]]), DEPTH_MAP), {}),
     "labutils.model:rectify_pair": ((STEREO_IMG, STEREO_IMG, KS, RS1, TS1, KS, RS2, TS2), {}),
     "labutils.model:disparity_range": ((RECT_PAIR, np.array([[0.0, -0.5, 0.0], [0.0, 0.5, 0.0]])), {}),
+    "labutils.model:make_snowman": ((3,), {"rng": "RNG", "image_size": (64, 48), "f": 84.0}),
+    "labutils.model:make_textured_scene": ((3,), {"rng": "RNG", "image_size": (64, 48), "f": 84.0}),
+    "labutils.model:make_textured_spheres": ((3,), {"rng": "RNG", "image_size": (64, 48), "f": 84.0}),
+    "labutils.model:make_layered_pair": ((), {"rng": "RNG", "image_size": (64, 48), "d_background": 2,
+                                              "d_layers": (5, 8)}),
+    "labutils.model:bounding_box_from_silhouettes": ((SNOW.masks, SNOW.P), {"n": 10}),
+    "labutils.model:carve": ((SNOW.masks, SNOW.P, GRID), {}),
+    "labutils.model:surface_mesh": ((CARVING,), {}),
+    "labutils.model:held_out_error": ((VV, [0]), {}),
 }
 VALID.update(HELPERS)
 
@@ -300,9 +313,7 @@ NOT_YET_SWEPT = {
     "labutils.sfm": "global_sfm view_graph",
     "labutils.calibrate": "detect_corners load_stereo_chessboard render_board_views view_influence",
     "labutils.match": "render_corner",
-    "labutils.model": "bounding_box_from_silhouettes carve choose_threshold depth_map_from_disparity "
-                      "fuse_depth_maps held_out_error make_layered_pair make_snowman make_textured_scene "
-                      "make_textured_spheres stereo_depth_map surface_mesh",
+    "labutils.model": "choose_threshold depth_map_from_disparity fuse_depth_maps stereo_depth_map",
 }
 
 
@@ -470,6 +481,14 @@ ACCEPTED.update({
     ("labutils.model:depth_in_map", "X", "one_row"): "one point",
     ("labutils.model:depth_in_map", "X", "empty"): "no points in, no depths out",
     ("labutils.model:disparity_range", "X", "one_row"): "one point bounds the disparities too (with the margin)",
+    ("labutils.model:make_layered_pair", "d_background", "zero"): "a background at infinity (disparity 0)",
+    ("labutils.model:make_layered_pair", "d_layers", "drop_column"): "one layer in front of the background",
+    ("labutils.model:make_layered_pair", "d_layers", "one_row"): "one layer in front of the background",
+    ("labutils.model:make_layered_pair", "d_layers", "empty"): "no layers: the background alone",
+    ("labutils.model:bounding_box_from_silhouettes", "masks", "drop_column"):
+        "P carries no image size: a mask of any size is read as the image",
+    ("labutils.model:carve", "masks", "drop_column"):
+        "P carries no image size: a mask of any size is read as the image",
 })
 NAN_IS_DOCUMENTED = {("camera_center", "R", "nan"), ("camera_center", "t", "nan"),
                      ("labutils.pose:aligned_rotation_errors_deg", "R_est", "nan"),
@@ -489,7 +508,9 @@ ALIASES = {"bundle_adjust": {"X": "point_indices"},
            "labutils.model:edge_contrast": {"colors": r"\bvertices\b"},                   # one colour per vertex
            "labutils.model:render_silhouette": {"vertices": "faces hold vertex indices"},
            "labutils.model:silhouette_ious": {"vertices": "faces hold vertex indices",
-                                              "P": r"masks has \d+ silhouettes for \d+ cameras"}}
+                                              "P": r"masks has \d+ silhouettes for \d+ cameras"},
+           "labutils.model:bounding_box_from_silhouettes": {"P": r"masks has \d+ silhouettes for \d+ cameras"},
+           "labutils.model:carve": {"P": r"masks has \d+ silhouettes for \d+ cameras"}}
 
 
 K_ARGS = {"K", "K1", "K2", "Ks", "K_init", "K_new"}
