@@ -14,7 +14,7 @@ __all__ = ["BackgroundModel", "background_model", "colour_distance", "clean_mask
 
 def _as_number(value, name, *, lo=None, hi=None, integer=False, open_lo=False):
     """A finite float (or int) within [lo, hi] (``open_lo``: lo excluded), else ``ValueError`` naming ``name``."""
-    if isinstance(value, (bool, np.bool_)):                  # True is not 1
+    if isinstance(value, (bool, np.bool_, complex, np.complexfloating)):   # True is not 1, 1+2j not 1
         raise ValueError(f"{name} must be a number; got {value!r}")
     try:
         v = float(value)

@@ -6,7 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from skimage.measure import marching_cubes
 
-from ...core.validation import as_image_size, as_mesh
+from ...core.validation import as_array, as_image_size, as_mesh
 from .silhouettes import _as_number, clean_mask, mask_iou, signed_distance_map
 from .voxels import (
     Carving,
@@ -167,6 +167,15 @@ def silhouette_ious(vertices: ArrayLike, faces: ArrayLike, masks: Sequence[Array
 
 
 THRESHOLD_CANDIDATES = (0.5, 1.5, 2.5, 3.5, 5.0)
+
+
+def _as_distance_map(d, name):
+    """A finite real (H, W) colour-distance map, or ``ValueError`` naming it."""
+    a = as_array(d, name, "(H, W)")
+    if a.ndim != 2 or a.size == 0 or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be a finite (H, W) map of colour distances; got shape {a.shape}"
+                         + ("" if a.ndim != 2 or a.size == 0 else " with NaN or inf"))
+    return a
 """Colour thresholds tried by :func:`choose_threshold` (CIELAB units, lightness weighted)."""
 
 
@@ -203,7 +212,7 @@ def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, *,
         If no candidate leaves a non-empty carving.
     """
     P = _as_cameras(P)
-    distances = list(distances)
+    distances = [_as_distance_map(d, f"distances[{i}]") for i, d in enumerate(distances)]
     if len(distances) != len(P):
         raise ValueError(f"distances has {len(distances)} maps for {len(P)} cameras: one per view")
     candidates = sorted(_as_number(c, "candidates", lo=0) for c in candidates)
