@@ -13,10 +13,6 @@ def as_array(x, name, expected):
     Complex and boolean arrays are refused, never cast (a complex number's imaginary part would be dropped, and
     ``True`` would pass as 1).
 
-    >>> as_array([[1, 2], [3]], "x", "(N, 2)")
-    Traceback (most recent call last):
-    ...
-    ValueError: x must be a numeric array of shape (N, 2): ...
     >>> as_array([1 + 2j, 3], "x", "(N,)")
     Traceback (most recent call last):
     ...
@@ -116,22 +112,18 @@ def as_vector3(t, name="t"):
     return as_matrix(t, name, (3,))
 
 
-ROTATION_TOL = 1e-4
-"""How far (largest entry of ``|R Rᵀ - I|``) a matrix may be from SO(3) and still be read as a rotation: published
-cameras print their rotations to about 6 digits (Middlebury's parameter files, EPFL's ground truth are 1e-6 off)."""
+ROTATION_TOL = 1e-4   # largest |R Rᵀ - I| read as a rotation: published cameras print 6 digits (1e-6 off)
 _ROUNDOFF = 1e-9      # closer than this: round-off of a computed rotation, returned as it is, without a word
 
 
 class RotationProjectedWarning(UserWarning):
-    """A matrix within :data:`ROTATION_TOL` of a rotation but not within round-off was replaced by the nearest
-    rotation; the one-line message names the argument and the largest correction."""
+    """A matrix within :data:`ROTATION_TOL` of SO(3) was replaced by the nearest rotation (one line: the argument
+    and the largest correction)."""
 
 
 def as_rotation(R, name="R", tol=ROTATION_TOL):
-    """Return ``R`` as a (3, 3) rotation (orthonormal, det +1), or raise ``ValueError``.
-
-    A matrix within ``tol`` of a rotation (a rotation printed to 6 digits) is replaced by the nearest rotation, with
-    a :class:`RotationProjectedWarning` that reports the largest correction; see :func:`as_rotations`.
+    """Return ``R`` as a (3, 3) rotation (orthonormal, det +1), or raise ``ValueError``; within ``tol`` of one, the
+    nearest rotation (see :func:`as_rotations`).
 
     >>> as_rotation(2 * np.eye(3))
     Traceback (most recent call last):
@@ -142,34 +134,21 @@ def as_rotation(R, name="R", tol=ROTATION_TOL):
 
 
 def nearest_rotations(M):
-    """The rotations nearest (Frobenius) to a ``(V, 3, 3)`` stack of matrices with positive determinant: ``U Vᵀ``
-    of each SVD (H&Z Sec. A4.1.2; the matrices here are close to rotations, so no reflection can appear)."""
+    """The rotations nearest (Frobenius) to a ``(V, 3, 3)`` stack of near-rotations: ``U Vᵀ`` of each SVD."""
     U, _, Vt = np.linalg.svd(M)
     return U @ Vt
 
 
 def as_rotations(R, name="R", tol=ROTATION_TOL, n=None, like_name=None):
-    """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one.
-
-    The rule, the same wherever a rotation is read or checked: a matrix off SO(3) by at most round-off (1e-9) is
-    returned as it is; one off by at most ``tol`` (:data:`ROTATION_TOL`, 1e-4: rotations printed to 6 digits) is
-    replaced by the nearest rotation (SVD), and a :class:`RotationProjectedWarning` reports, in one line, the
-    argument and the largest correction of an entry; beyond ``tol``, or with det < 0, it is an error.
+    """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one. The
+    rule wherever a rotation is read: off SO(3) by round-off (1e-9), returned as it is; by at most ``tol`` (1e-4:
+    printed to 6 digits), replaced by the nearest rotation (SVD) with a one-line :class:`RotationProjectedWarning`
+    naming the argument and the largest correction; beyond ``tol``, or det < 0, an error.
 
     >>> as_rotations(np.stack([np.eye(3), -np.eye(3)]))
     Traceback (most recent call last):
     ...
     ValueError: R[1] is not a rotation matrix (orthonormal with det +1): |R Rᵀ - I| = 0, det R = -1
-    >>> import warnings
-    >>> with warnings.catch_warnings(record=True) as caught:
-    ...     warnings.simplefilter("always")
-    ...     c, s = np.cos(0.3), np.sin(0.3)
-    ...     R = as_rotations(np.round([[[c, 0, s], [0, 1, 0], [-s, 0, c]]], 6))      # printed to 6 digits
-    >>> print(caught[0].message)  # doctest: +NORMALIZE_WHITESPACE
-    R is 1.1e-06 off a rotation (within the tolerance 0.0001): replaced by the nearest rotation,
-    largest correction 5e-07
-    >>> float(np.abs(R[0] @ R[0].T - np.eye(3)).max()) < 1e-15
-    True
     """
     expected = "(V, 3, 3)" if n is None else f"({n}, 3, 3)"
     a = _as_float_array(R, name, expected)
@@ -233,10 +212,8 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
     Parameters
     ----------
     K : (3, 3) or (V, 3, 3) array_like
-        Upper-triangular or not (skew allowed): what is checked is that it is finite, its last row is
-        ``(0, 0, k)`` with ``k != 0``, its focal lengths ``K[0, 0] / k`` and ``K[1, 1] / k`` are positive (an RQ
-        split without fixing the signs gives negative ones, and a camera that sees the world mirrored), and it is
-        invertible.
+        Skew allowed. Checked: finite, last row ``(0, 0, k)`` with ``k != 0``, invertible, and positive focal
+        lengths ``K[0, 0] / k``, ``K[1, 1] / k`` (an RQ split whose signs were not fixed gives negative ones).
     name : str
     n_views : int, optional
         When given, a ``(3, 3)`` K is repeated for ``n_views`` views and a stack must have ``n_views`` entries;
@@ -323,9 +300,8 @@ def as_fundamental(F, name="F"):
 
 
 def as_essential(E, name="E", tol=1e-5):
-    """``E`` as a finite (3, 3) essential matrix, or ``ValueError``: two equal singular values and a zero one, each
-    within ``tol`` relative to the largest (H&Z Result 9.17). ``E = I`` (rank 3) or a ``K2ᵀ F K1`` not projected
-    onto the essential manifold is refused: its four "poses" would be chosen from without meaning.
+    """``E`` as a finite (3, 3) essential matrix, or ``ValueError``: singular values (s, s, 0) within ``tol``
+    relative (H&Z Result 9.17); ``E = I`` or a ``K2ᵀ F K1`` not projected onto the manifold is refused.
 
     >>> as_essential(np.eye(3))
     Traceback (most recent call last):
@@ -344,8 +320,7 @@ def as_essential(E, name="E", tol=1e-5):
 
 
 def as_camera_matrix(P, name="P"):
-    """``P`` as a finite (3, 4) camera matrix of rank 3, or ``ValueError`` (a rank-deficient P has no centre and
-    images every point onto a line or a point).
+    """``P`` as a finite (3, 4) camera matrix of rank 3, or ``ValueError`` (a rank-deficient P has no centre).
 
     >>> as_camera_matrix(np.outer([1.0, 2, 3], [1.0, 0, 0, 1]))
     Traceback (most recent call last):
@@ -365,28 +340,14 @@ def as_camera_matrices(Ps, name="Ps"):
     a = _as_float_array(Ps, name, "(V, 3, 4)")
     if a.ndim != 3 or a.shape[1:] != (3, 4):
         raise ValueError(f"{name} must have shape (V, 3, 4); got shape {a.shape}")
-    for k, P in enumerate(a):
-        as_camera_matrix(P, f"{name}[{k}]")
-    return a
+    return np.stack([as_camera_matrix(P, f"{name}[{k}]") for k, P in enumerate(a)]) if len(a) else a
 
 
 def as_indices(idx, name, n, *, length=None, like_name="camera_indices", what="item", holder=None):
-    """A 1-D int64 array of indices in ``0..n-1``, or ``ValueError``.
+    """A 1-D int64 array of indices in ``0..n-1`` (``n`` ``what``s, held by the argument ``holder``; ``length``
+    entries, one per entry of ``like_name``, when given), or ``ValueError``. Integers only: a boolean mask is refused
+    (NumPy would read ``True``/``False`` as 1/0), and so are floats; an index out of range is named.
 
-    Integers only: a boolean mask is refused (NumPy would read ``True``/``False`` as 1/0), and so are floats (even
-    integral ones); an index out of range (a negative one would wrap to the end) is named with its position.
-
-    Parameters
-    ----------
-    idx : (M,) array_like of int
-    name : str
-    n : int
-        How many ``what``s there are (the indices' range is ``0..n-1``), held by the argument ``holder``.
-    length : int, optional
-        When given, ``idx`` must have this many entries (one per entry of ``like_name``).
-
-    >>> as_indices([0, 2, 1], "camera_indices", 3)
-    array([0, 2, 1])
     >>> as_indices(np.array([True, False]), "camera_indices", 3, what="camera")
     Traceback (most recent call last):
     ...
@@ -417,21 +378,16 @@ def as_indices(idx, name, n, *, length=None, like_name="camera_indices", what="i
 
 
 def as_mask(mask, name, shape, like=None):
-    """A boolean mask of ``shape``: a bool array, or numbers that are all 0 or 1; ``ValueError`` otherwise (naming
-    ``like``, the argument(s) the shape comes from, when given).
-
-    >>> as_mask([[1, 0]], "visible", (1, 2))
-    array([[ True, False]])
-    """
+    """A boolean mask of ``shape`` (bools, or numbers all 0 or 1), or ``ValueError`` (naming ``like``, whence the
+    shape, when given)."""
     try:
         a = np.asarray(mask)
     except ValueError as exc:
         raise ValueError(f"{name} must be a boolean array of shape {shape}: {exc}") from None
     if a.shape != tuple(shape) or a.dtype.kind not in "biuf" or (a.dtype.kind != "b" and a.size and
                                                                   not np.all((a == 0) | (a == 1))):
-        match = f" (to match {like})" if like else ""
-        raise ValueError(f"{name} must be a boolean array of shape {tuple(shape)}{match}; got shape {a.shape}, "
-                         f"dtype {a.dtype}")
+        raise ValueError(f"{name} must be a boolean array of shape {tuple(shape)}" + (f" (to match {like})" if like
+                         else "") + f"; got shape {a.shape}, dtype {a.dtype}")
     return a.astype(bool)
 
 

@@ -13,16 +13,7 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import right_jacobian_so3, rotation_from_angle_axis
 from ..core.ransac import ransac
-from ..core.validation import (
-    as_calibration,
-    as_count,
-    as_matrix,
-    as_points,
-    as_positive,
-    as_rng,
-    as_rotation,
-    as_vector3,
-)
+from ..core.validation import as_calibration, as_count, as_matrix, as_points, as_positive, as_rng, as_rotation
 
 # --------------------------------------------------------------------------------------------- helpers
 
@@ -406,7 +397,7 @@ def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigm
     X = as_points(X, "X", dim=3, min_n=3)
     K = as_calibration(K, "K")
     R = as_rotation(R, "R")
-    t = as_vector3(t, "t")
+    t = as_matrix(t, "t", (3,))
     sigma = as_positive(sigma, "sigma", allow_zero=True)
     depth = X @ R[2] + t[2]
     if not np.all(depth > 0):

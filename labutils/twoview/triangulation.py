@@ -350,15 +350,10 @@ def ray_angles_deg(C: ArrayLike, X: ArrayLike, mask: ArrayLike) -> np.ndarray:
     array([90., 45.])
     """
     C, X = as_array(C, "C", "(V, 3)"), as_array(X, "X", "(T, 3)")
-    if C.ndim != 2 or C.shape[1] != 3:
-        raise ValueError(f"C must have shape (V, 3) (one centre per row); got shape {C.shape}")
-    if X.ndim != 2 or X.shape[1] != 3:
-        raise ValueError(f"X must have shape (T, 3) (points as rows); got shape {X.shape}")
-    mask = as_mask(mask, "mask", (len(C), len(X)), like="the rows of C and X")
+    mask = as_mask(mask, "mask", C.shape[:1] + X.shape[:1], like="the rows of C and X")
     for name, a, used in (("C", C, mask.any(axis=1)), ("X", X, mask.any(axis=0))):
-        bad = np.flatnonzero(used & ~np.all(np.isfinite(a), axis=1))
-        if bad.size:
-            raise ValueError(f"{name} has non-finite rows {bad[:5].tolist()} that mask uses")
+        if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a[used])):
+            raise ValueError(f"{name} must have shape (N, 3), finite in the rows mask uses; got shape {a.shape}")
     n = mask.sum(0)
     angle = np.full(X.shape[0], np.nan)
     order = np.argsort(~mask, axis=0, kind="stable")                      # observing views first
