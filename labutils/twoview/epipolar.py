@@ -226,7 +226,8 @@ def sampson_distance(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     >>> sampson_distance(F, [[0., 0.]], [[5., 2.]])
     array([1.41421356])
     """
-    F = as_fundamental(F, "F")[0]
+    F = as_matrix(F, "F", (3, 3))
+    as_fundamental(F, "F")                      # rank 2 (to 1e-7): F = 0 or I would make every match an inlier
     x1, x2 = check_pair(x1, x2, 1)
     return _sampson(F, x1, x2)
 

@@ -58,7 +58,8 @@ def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np
     >>> np.linalg.svd(essential_from_fundamental(F, K, K))[1].round(9)
     array([1., 1., 0.])
     """
-    F = as_fundamental(F, "F")[0]
+    F = as_matrix(F, "F", (3, 3))
+    as_fundamental(F, "F")
     K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
     U, s, Vt = np.linalg.svd(K2.T @ F @ K1)
     if s[1] <= 1e-12 * s[0]:
