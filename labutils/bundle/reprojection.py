@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import angle_axis_from_rotation, left_jacobian_so3, rotation_from_angle_axis
 from ..core.validation import as_array, as_calibration, as_count, as_points, as_rotations, as_translations
+from ..core.validation import as_indices as _as_indices
 
 
 def camera_params_from_Rt(R: ArrayLike, t: ArrayLike) -> np.ndarray:
@@ -63,26 +64,9 @@ def Rt_from_camera_params(camera_params: ArrayLike) -> tuple:
 
 def as_indices(a, name, n_obs, upper, what, *, upper_name=None):
     """``a`` as a 1-D int64 array of indices in ``0..upper - 1`` (of ``what``s, held by ``upper_name``), with
-    ``n_obs`` entries (those of ``camera_indices``) when given, or ``ValueError`` naming the problem."""
-    a = np.asarray(a)
-    if a.ndim != 1:
-        raise ValueError(f"{name} must be a 1-D array of integers; got shape {a.shape}")
-    if n_obs is not None and a.shape[0] != n_obs:
-        raise ValueError(f"{name} has {a.shape[0]} entries but camera_indices has {n_obs}: one entry of each per "
-                         "observation")
-    if a.size and a.dtype.kind not in "iu":
-        af = a.astype(float)
-        if not np.all(np.isfinite(af)) or np.any(af != np.round(af)):
-            raise ValueError(f"{name} must hold integers (indices of {what}s)")
-        a = af
-    a = a.astype(np.int64)
-    bad = np.flatnonzero((a < 0) | (a >= upper))
-    if bad.size:
-        held = f" ({upper_name} has {upper})" if upper_name else ""
-        raise ValueError(f"{name}[{int(bad[0])}] = {int(a[bad[0]])} indexes a missing {what}: "
-                         f"there are {upper} {what}s{held}, valid indices 0..{upper - 1}; "
-                         f"{bad.size} observation(s) are out of range")
-    return a
+    ``n_obs`` entries (those of ``camera_indices``) when given, or ``ValueError`` naming the problem
+    (:func:`labutils.core.validation.as_indices`: integers only, never booleans)."""
+    return _as_indices(a, name, upper, length=n_obs, what=what, holder=upper_name)
 
 
 def check_calibrations(K, n_cameras, k):
@@ -99,10 +83,7 @@ def check_calibrations(K, n_cameras, k):
 
 
 def check_problem(camera_params, points_3d, camera_indices, point_indices, points_2d, K, need_2d=True):
-    try:
-        cp = np.asarray(camera_params, float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"camera_params must be a numeric (V, 6) or (V, 9) array: {exc}") from None
+    cp = as_array(camera_params, "camera_params", "(V, 6) or (V, 9)")
     if cp.ndim != 2 or cp.shape[1] not in (6, 9) or cp.shape[0] < 1:
         raise ValueError(f"camera_params must have shape (V, 6) or (V, 9) with V >= 1; got {cp.shape}")
     bad = np.flatnonzero(~np.all(np.isfinite(cp), axis=1))

@@ -29,7 +29,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.geometry import angle_axis_from_rotation, camera_center, left_jacobian_so3, skew
-from ..core.validation import as_calibration, as_points, as_positive, as_rotations, as_translations
+from ..core.validation import (
+    as_array,
+    as_calibration,
+    as_count,
+    as_points,
+    as_positive,
+    as_rotations,
+    as_translations,
+)
 from .gauge import gauge_basis
 from .reprojection import as_indices, camera_params_from_Rt, reprojection_jacobian
 
@@ -157,6 +165,7 @@ def camera_information(J, n_cameras, n_points):
         If the shape does not match, or a point is not determined (seen by fewer than 2 views, or
         along a single ray).
     """
+    n_cameras, n_points = as_count(n_cameras, "n_cameras"), as_count(n_points, "n_points")
     J = sp.csr_matrix(J)
     nc, npnt = 6 * n_cameras, 3 * n_points
     if J.shape[1] != nc + npnt:
@@ -209,7 +218,11 @@ def effective_terms(cov):
     >>> effective_terms(np.eye(6)), effective_terms(np.diag([1.0, 0, 0]))
     (6.0, 1.0)
     """
-    cov = np.asarray(cov, float)
+    cov = as_array(cov, "cov", "(d, d)")
+    if cov.ndim != 2 or cov.shape[0] != cov.shape[1] or cov.size == 0 or not np.all(np.isfinite(cov)):
+        raise ValueError(f"cov must be a finite square (d, d) matrix; got shape {cov.shape}")
+    if not np.sum(cov * cov) > 0:
+        raise ValueError("cov is zero: no terms to count")
     return float(np.trace(cov) ** 2 / np.sum(cov * cov))
 
 

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from ..core.geometry import rotation_from_angle_axis
-from ..core.validation import as_image_size, as_points, as_rotation, as_vector3
+from ..core.validation import as_count, as_image_size, as_points, as_positive, as_rotation, as_vector3
 from ..data.paths import DataNotFoundError, find_data
 from .lens import as_distortion, as_intrinsics, project_points, undistort_normalised
 
@@ -38,9 +38,10 @@ where <data> is $LABUTILS_DATA, the project's data/ folder, or ../shared/data/ b
 
 def _board(board):
     try:
-        nx, ny = (int(v) for v in board)
+        nx, ny = (as_count(v, "board") for v in board)
     except (TypeError, ValueError):
-        raise ValueError(f"board must be (columns, rows) of inner corners, e.g. (9, 6); got {board!r}") from None
+        raise ValueError(f"board must be (columns, rows) of inner corners, two integers, e.g. (9, 6); got {board!r}") \
+            from None
     if nx < 2 or ny < 2:
         raise ValueError(f"board must have at least 2x2 inner corners; got {nx}x{ny}")
     return nx, ny
@@ -230,10 +231,8 @@ def synthetic_board_views(n_views=12, noise_px=0.1, *, rng, K=None, dist=None, b
     """
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
-    if int(n_views) < 1:
-        raise ValueError(f"n_views must be at least 1; got {n_views}")
-    if not (np.isfinite(noise_px) and noise_px >= 0):
-        raise ValueError(f"noise_px must be a non-negative number; got {noise_px!r}")
+    n_views = as_count(n_views, "n_views", 1)
+    noise_px = as_positive(noise_px, "noise_px", allow_zero=True)
     K = as_intrinsics(DEFAULT_K if K is None else K)
     dist = as_distortion(DEFAULT_DIST if dist is None else dist)
     board = _board(board)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..core.validation import as_array, as_image_size, as_matrix, as_points, as_rotation
+from ..core.validation import as_array, as_image, as_image_size, as_matrix, as_points, as_rotation
 from .lens import as_distortion, as_intrinsics, distort, undistort_points
 
 __all__ = ["remap_grid", "undistort_image", "Rectification", "rectify_fusiello", "rectify_points", "rectify_image"]
@@ -105,9 +105,7 @@ def undistort_image(image, K, dist, K_new=None):
     -------
     ndarray, like ``image``
     """
-    image = np.asarray(image)
-    if image.ndim not in (2, 3):
-        raise ValueError(f"image must have shape (h, w) or (h, w, 3); got {image.shape}")
+    image = as_image(image, "image")
     h, w = image.shape[:2]
     K = as_intrinsics(K)
     H = None if K_new is None else as_intrinsics(K_new, "K_new") @ np.linalg.inv(K)
@@ -234,9 +232,7 @@ def rectify_points(x, K, dist, H):
 
 def rectify_image(image, K, dist, H, out_size=None):
     """Warp an image into the rectified frame: ``cv2.remap`` with the maps of :func:`remap_grid` (bilinear)."""
-    image = np.asarray(image)
-    if image.ndim not in (2, 3):
-        raise ValueError(f"image must have shape (h, w) or (h, w, 3); got {image.shape}")
+    image = as_image(image, "image")
     h, w = image.shape[:2]
     mx, my = remap_grid(K, dist, (w, h), H, out_size)
     return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)

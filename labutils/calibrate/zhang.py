@@ -3,7 +3,7 @@ view's pose (Z. Zhang, "A flexible new technique for camera calibration", IEEE P
 H&Z Sec. 8.5 and 8.8)."""
 import numpy as np
 
-from ..core.validation import as_array, as_matrix, as_points
+from ..core.validation import as_array, as_calibration, as_matrix, as_points
 from ..twoview.epipolar import homography_dlt
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -161,7 +161,7 @@ def pose_from_homography(H, K):
     (True, array([0.1, 0.2, 2. ]))
     """
     H = as_matrix(H, "H", (3, 3))
-    K = as_matrix(K, "K", (3, 3))
+    K = as_calibration(K, "K")
     M = np.linalg.solve(K, H)
     lam = 2.0 / (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
     if M[2, 2] < 0:

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike
 
-from .validation import as_array, as_matrix, as_points, as_rotation, as_rotations
+from .validation import as_array, as_calibration, as_camera_matrix, as_matrix, as_points, as_rotation, as_rotations
 
 
 def homogeneous(x: ArrayLike) -> np.ndarray:
@@ -142,7 +142,7 @@ def angle_axis_from_rotation(R: ArrayLike) -> np.ndarray:
     Parameters
     ----------
     R : (3, 3) or (V, 3, 3) array_like
-        Rotations (orthonormal, det +1, to 1e-6).
+        Rotations (orthonormal, det +1, to 1e-4: nearer than that, the nearest rotation is taken).
 
     Returns
     -------
@@ -166,21 +166,26 @@ def angle_axis_from_rotation(R: ArrayLike) -> np.ndarray:
     R = as_array(R, "R", "(3, 3) or (V, 3, 3)")
     single = R.shape == (3, 3)
     Rs = as_rotations(R[None] if single else R, "R")
-    out = np.empty((len(Rs), 3))
-    for k, Rk in enumerate(Rs):
-        cos = np.clip((np.trace(Rk) - 1) / 2, -1.0, 1.0)
-        theta = np.arccos(cos)
-        v = np.array([Rk[2, 1] - Rk[1, 2], Rk[0, 2] - Rk[2, 0], Rk[1, 0] - Rk[0, 1]])
-        if theta < 1e-6:
-            out[k] = 0.5 * v
-        elif np.pi - theta < 1e-4:
-            # near pi: axis from the symmetric part, sign fixed by v
-            B = (Rk + np.eye(3)) / 2
-            axis = B[np.argmax(np.diag(B))]
-            axis = axis / np.linalg.norm(axis)
-            out[k] = theta * (-axis if axis @ v < 0 else axis)
-        else:
-            out[k] = theta / (2 * np.sin(theta)) * v
+    # sin θ · axis from the skew part, cos θ from the trace: θ = atan2 of the two is accurate at every angle.
+    v = np.stack([Rs[:, 2, 1] - Rs[:, 1, 2], Rs[:, 0, 2] - Rs[:, 2, 0], Rs[:, 1, 0] - Rs[:, 0, 1]], axis=1)
+    sin = 0.5 * np.linalg.norm(v, axis=1)
+    cos = 0.5 * (np.trace(Rs, axis1=1, axis2=2) - 1)
+    theta = np.arctan2(sin, cos)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(sin[:, None] > 0, theta[:, None] * v / (2 * sin[:, None]), 0.0)
+        # 0.1 <= θ <= 3: arccos is as accurate, and gives the same bits as before (fits started from it repeat)
+        mid = (cos <= np.cos(0.1)) & (cos >= np.cos(3.0))
+        th = np.arccos(cos[mid])
+        out[mid] = (th / (2 * np.sin(th)))[:, None] * v[mid]
+    # beyond 3 the skew part shrinks as sin θ: the axis from the symmetric part, (1 - cos θ) a aᵀ
+    wide = np.flatnonzero(cos < np.cos(3.0))
+    if wide.size:
+        S = 0.5 * (Rs[wide] + np.swapaxes(Rs[wide], 1, 2)) - cos[wide, None, None] * np.eye(3)
+        j = np.argmax(np.diagonal(S, axis1=1, axis2=2), axis=1)
+        axis = S[np.arange(wide.size), :, j]
+        axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+        axis *= np.where(np.einsum("ni,ni->n", axis, v[wide]) < 0, -1.0, 1.0)[:, None]
+        out[wide] = theta[wide, None] * axis
     return out[0] if single else out
 
 
@@ -241,6 +246,7 @@ def P_from_KRt(K: ArrayLike, R: ArrayLike, t: ArrayLike) -> np.ndarray:
     (3, 4)
     """
     K = as_matrix(K, "K", (3, 3))
+    as_calibration(K, "K")
     R = as_rotation(R, "R")
     t = as_matrix(t, "t", (3,))
     return K @ np.hstack([R, t[:, None]])
@@ -296,7 +302,7 @@ def project(P: ArrayLike, X: ArrayLike) -> np.ndarray:
     ...
     ValueError: X must have shape (N, 3) (points as rows); got shape (1, 2)
     """
-    P = as_matrix(P, "P", (3, 4))
+    P = as_camera_matrix(P, "P")
     X = as_points(X, "X", dim=3)
     x_h = X @ P[:, :3].T + P[:, 3]
     bad = np.flatnonzero(x_h[:, 2] == 0)
@@ -328,11 +334,21 @@ def camera_center(R: ArrayLike, t: ArrayLike) -> np.ndarray:
     if np.isinf(R).any() or np.isinf(t).any():
         raise ValueError("R and t must not hold inf (NaN marks a camera that is not there)")
     if R.shape == (3, 3) and t.shape == (3,):
-        return -R.T @ t
+        return -np.einsum("vji,vj->vi", _registered_rotations(R[None]), t[None])[0]
     if R.ndim != 3 or R.shape[1:] != (3, 3) or t.shape != (R.shape[0], 3):
         raise ValueError(f"R and t must have shapes (3, 3) and (3,), or (V, 3, 3) and (V, 3); got {R.shape} and "
                          f"{t.shape}" + (" — t transposed?" if t.shape == (3, R.shape[0]) else ""))
-    return -np.einsum("vji,vj->vi", R, t)
+    return -np.einsum("vji,vj->vi", _registered_rotations(R), t)
+
+
+def _registered_rotations(R):
+    """The rows of a ``(V, 3, 3)`` stack that are finite, checked as rotations; NaN rows kept as they are."""
+    ok = np.all(np.isfinite(R), axis=(1, 2))
+    if ok.all():
+        return as_rotations(R, "R")
+    R = R.copy()
+    R[ok] = as_rotations(R[ok], "R")
+    return R
 
 
 def relative_pose(R1: ArrayLike, t1: ArrayLike, R2: ArrayLike, t2: ArrayLike) -> tuple:
@@ -368,7 +384,7 @@ def pixels_and_depths(K: ArrayLike, R: ArrayLike, t: ArrayLike, X: ArrayLike) ->
     >>> x.tolist(), z.tolist()
     ([[1.0, 2.0], [nan, nan]], [2.0, nan])
     """
-    K, R, t = as_matrix(K, "K", (3, 3)), as_rotation(R, "R"), as_matrix(t, "t", (3,))
+    K, R, t = as_calibration(K, "K"), as_rotation(R, "R"), as_matrix(t, "t", (3,))
     X = as_array(X, "X", "(N, 3)")
     if X.ndim != 2 or X.shape[1] != 3:
         raise ValueError(f"X must have shape (N, 3) (points as rows); got shape {X.shape}")

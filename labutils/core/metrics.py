@@ -12,8 +12,7 @@ def _rotation_stack(R, name):
     a = as_array(R, name, "(3, 3) or (..., 3, 3)")
     if a.ndim < 2 or a.shape[-2:] != (3, 3):
         raise ValueError(f"{name} must have shape (3, 3) or (..., 3, 3); got shape {a.shape}")
-    as_rotations(a.reshape(-1, 3, 3), name)
-    return a
+    return as_rotations(a.reshape(-1, 3, 3), name).reshape(a.shape)
 
 
 def rotation_error_deg(R_est: ArrayLike, R_true: ArrayLike) -> np.ndarray:
@@ -164,7 +163,7 @@ def rms(r: ArrayLike) -> float:
     >>> rms([3.0, 4.0]) ** 2
     12.5
     """
-    r = np.asarray(r, float)
+    r = as_array(r, "r", "(any shape)")
     if r.size == 0 or not np.all(np.isfinite(r)):
         raise ValueError(f"r must be a non-empty array of finite numbers; got shape {r.shape}"
                          + ("" if r.size == 0 else " with NaN or inf"))

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 
 from .geometry import P_from_KRt, camera_center
-from .validation import as_tracks
+from .validation import as_array, as_count, as_indices, as_points, as_tracks
 
 
 class ImageNotReadable(OSError):
@@ -49,7 +49,18 @@ def nan_tracks(raw, missing=-1):
     array([[[ 1.,  2.],
             [nan, nan]]])
     """
-    x = np.array(raw, dtype=float)
+    x = as_array(raw, "raw", "(V, M, 2)").copy()
+    if x.ndim != 3 or x.shape[2] != 2:
+        raise ValueError(f"raw must have shape (V, M, 2) (views, tracks, pixel); got shape {x.shape}")
+    if np.isinf(x).any():
+        raise ValueError("raw has infinite entries: mark an unseen observation with the missing value")
+    if not (isinstance(missing, (int, float, np.integer, np.floating)) and not isinstance(missing, bool)
+            and np.isfinite(missing)):
+        raise ValueError(f"missing must be a finite number (the marker of an unseen observation); got {missing!r}")
+    half = np.isnan(x[..., 0]) != np.isnan(x[..., 1])
+    if half.any():
+        v, k = np.argwhere(half)[0]
+        raise ValueError(f"raw[{v}, {k}] has one NaN coordinate: an observation is two numbers or unseen")
     x[np.any(x == missing, axis=-1)] = np.nan
     return x
 
@@ -74,9 +85,23 @@ def observations(x):
 
 
 def tracks_from_observations(camera_indices, point_indices, points_2d, n_views, n_points):
-    """Inverse of :func:`observations`: a ``(n_views, n_points, 2)`` array, NaN where unseen."""
+    """Inverse of :func:`observations`: a ``(n_views, n_points, 2)`` array, NaN where unseen.
+
+    Each (view, point) pair may be observed once; indices must be integers in range (``ValueError`` otherwise).
+
+    >>> tracks_from_observations([0, 1], [1, 0], [[5.0, 6.0], [7.0, 8.0]], 2, 2)[:, :, 0].tolist()
+    [[nan, 5.0], [7.0, nan]]
+    """
+    n_views, n_points = as_count(n_views, "n_views"), as_count(n_points, "n_points")
+    ci = as_indices(camera_indices, "camera_indices", n_views, what="view", holder="n_views")
+    pi = as_indices(point_indices, "point_indices", n_points, length=len(ci), what="point", holder="n_points")
+    xy = as_points(points_2d, "points_2d", min_n=0, like=(ci, "camera_indices"))
+    key = ci * n_points + pi
+    if np.unique(key).size < key.size:
+        dup = int(np.flatnonzero(np.bincount(key) > 1)[0])
+        raise ValueError(f"view {dup // n_points} observes point {dup % n_points} more than once")
     x = np.full((n_views, n_points, 2), np.nan)
-    x[np.asarray(camera_indices), np.asarray(point_indices)] = points_2d
+    x[ci, pi] = xy
     return x
 
 

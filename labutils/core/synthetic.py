@@ -7,7 +7,16 @@ from numpy.typing import ArrayLike
 
 from .geometry import P_from_KRt, camera_center, project, rotation_from_angle_axis
 from .scene import Scene
-from .validation import as_calibration, as_count, as_fraction, as_positive, as_rng, as_rotations, as_translations
+from .validation import (
+    as_calibration,
+    as_count,
+    as_fraction,
+    as_positive,
+    as_rng,
+    as_rotations,
+    as_translations,
+    as_vector3,
+)
 
 DEFAULT_K = np.array([[1500.0, 0.0, 360.0], [0.0, 1500.0, 288.0], [0.0, 0.0, 1.0]])
 
@@ -19,8 +28,12 @@ def look_at(C, target, up=(0.0, 0.0, 1.0)):
     >>> np.allclose(R @ np.zeros(3) + t, [0, 0, 5])
     True
     """
-    C, target, up = (np.asarray(a, float) for a in (C, target, up))
+    C, target, up = as_vector3(C, "C"), as_vector3(target, "target"), as_vector3(up, "up")
     z = target - C
+    if not np.linalg.norm(z) > 0:
+        raise ValueError("target must differ from C (the camera looks from C towards target)")
+    if not np.linalg.norm(up) > 0:
+        raise ValueError("up must be a non-zero vector")
     z /= np.linalg.norm(z)
     x = np.cross(z, up)
     if np.linalg.norm(x) < 1e-9:                 # looking along `up`: pick another

@@ -1,6 +1,7 @@
 """Input checks shared by every module: clear ``ValueError`` messages that name the argument, what was expected
 and what it got. Nothing here reshapes silently: a ``(3, V)`` array where ``(V, 3)`` is expected is an error."""
 import numbers
+import warnings
 
 import numpy as np
 
@@ -9,13 +10,27 @@ def as_array(x, name, expected):
     """``x`` as a float array (any shape), or ``ValueError`` naming ``name`` and the ``expected`` shape when it is not
     numeric (a string, a ragged list).
 
-    >>> as_array([[1, 2], [3]], "x", "(N, 2)")
+    Complex and boolean arrays are refused, never cast (a complex number's imaginary part would be dropped, and
+    ``True`` would pass as 1).
+
+    >>> as_array([1 + 2j, 3], "x", "(N,)")
     Traceback (most recent call last):
     ...
-    ValueError: x must be a numeric array of shape (N, 2): ...
+    ValueError: x must be real; got a complex array (dtype complex128) of shape (2,): ...
     """
+    if isinstance(x, (str, bytes)):
+        raise ValueError(f"{name} must be a numeric array of shape {expected}; got the string {x!r:.40}")
     try:
-        a = np.asarray(x, dtype=float)
+        raw = np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array of shape {expected}: {exc}") from None
+    if raw.dtype.kind == "c":
+        raise ValueError(f"{name} must be real; got a complex array (dtype {raw.dtype}) of shape {raw.shape}: "
+                         "take .real only if the imaginary part is known to be zero")
+    if raw.dtype.kind == "b" or raw.dtype == object and any(isinstance(v, (bool, np.bool_)) for v in raw.flat):
+        raise ValueError(f"{name} must be a numeric array of shape {expected}; got booleans (dtype {raw.dtype})")
+    try:
+        a = np.asarray(raw, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be a numeric array of shape {expected}: {exc}") from None
     return a
@@ -97,8 +112,18 @@ def as_vector3(t, name="t"):
     return as_matrix(t, name, (3,))
 
 
-def as_rotation(R, name="R", tol=1e-6):
-    """Return ``R`` as a (3, 3) rotation (orthonormal, det +1), or raise ``ValueError``.
+ROTATION_TOL = 1e-4   # largest |R Rᵀ - I| read as a rotation: published cameras print 6 digits (1e-6 off)
+_ROUNDOFF = 1e-9      # closer than this: round-off of a computed rotation, returned as it is, without a word
+
+
+class RotationProjectedWarning(UserWarning):
+    """A matrix within :data:`ROTATION_TOL` of SO(3) was replaced by the nearest rotation (one line: the argument
+    and the largest correction)."""
+
+
+def as_rotation(R, name="R", tol=ROTATION_TOL):
+    """Return ``R`` as a (3, 3) rotation (orthonormal, det +1), or raise ``ValueError``; within ``tol`` of one, the
+    nearest rotation (see :func:`as_rotations`).
 
     >>> as_rotation(2 * np.eye(3))
     Traceback (most recent call last):
@@ -108,8 +133,17 @@ def as_rotation(R, name="R", tol=1e-6):
     return as_rotations(as_matrix(R, name, (3, 3))[None], name, tol)[0]
 
 
-def as_rotations(R, name="R", tol=1e-6, n=None, like_name=None):
-    """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one.
+def nearest_rotations(M):
+    """The rotations nearest (Frobenius) to a ``(V, 3, 3)`` stack of near-rotations: ``U Vᵀ`` of each SVD."""
+    U, _, Vt = np.linalg.svd(M)
+    return U @ Vt
+
+
+def as_rotations(R, name="R", tol=ROTATION_TOL, n=None, like_name=None):
+    """Return ``R`` as a ``(V, 3, 3)`` stack of rotations, or raise ``ValueError`` naming the first bad one. The
+    rule wherever a rotation is read: off SO(3) by round-off (1e-9), returned as it is; by at most ``tol`` (1e-4:
+    printed to 6 digits), replaced by the nearest rotation (SVD) with a one-line :class:`RotationProjectedWarning`
+    naming the argument and the largest correction; beyond ``tol``, or det < 0, an error.
 
     >>> as_rotations(np.stack([np.eye(3), -np.eye(3)]))
     Traceback (most recent call last):
@@ -127,12 +161,24 @@ def as_rotations(R, name="R", tol=1e-6, n=None, like_name=None):
         raise ValueError(f"{who} has non-finite entries (NaN or inf)")
     err = np.abs(a @ np.swapaxes(a, 1, 2) - np.eye(3)).max(axis=(1, 2))
     det = np.linalg.det(a)
-    bad = np.flatnonzero((err > tol) | (det < 0))
+    bad = np.flatnonzero((err > tol) | (det <= 0))
     if bad.size:
         k = int(bad[0])
         who = f"{name}[{k}]" if len(a) > 1 or n is not None else name
         raise ValueError(f"{who} is not a rotation matrix (orthonormal with det +1): "
                          f"|R Rᵀ - I| = {err[k]:.3g}, det R = {det[k]:.3g}")
+    off = np.flatnonzero(err > _ROUNDOFF)
+    if off.size:
+        a = a.copy()
+        near = nearest_rotations(a[off])
+        change = np.abs(near - a[off]).max(axis=(1, 2))
+        a[off] = near
+        k = int(off[np.argmax(change)])
+        who = f"{name}[{k}]" if len(a) > 1 or n is not None else name
+        many = f" (and {off.size - 1} more)" if off.size > 1 else ""
+        warnings.warn(f"{who} is {err[k]:.2g} off a rotation (within the tolerance {tol:g}){many}: replaced by the "
+                      f"nearest rotation, largest correction {change.max():.2g}", RotationProjectedWarning,
+                      stacklevel=3)
     return a
 
 
@@ -166,8 +212,8 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
     Parameters
     ----------
     K : (3, 3) or (V, 3, 3) array_like
-        Upper-triangular or not (skew allowed): what is checked is that it is finite, its last row is
-        ``(0, 0, k)`` with ``k != 0``, and it is invertible.
+        Skew allowed. Checked: finite, last row ``(0, 0, k)`` with ``k != 0``, invertible, and positive focal
+        lengths ``K[0, 0] / k``, ``K[1, 1] / k`` (an RQ split whose signs were not fixed gives negative ones).
     name : str
     n_views : int, optional
         When given, a ``(3, 3)`` K is repeated for ``n_views`` views and a stack must have ``n_views`` entries;
@@ -187,6 +233,10 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
     Traceback (most recent call last):
     ...
     ValueError: K is singular (det = 0): a calibration matrix must be invertible
+    >>> as_calibration(np.diag([-800.0, -800.0, 1.0]))
+    Traceback (most recent call last):
+    ...
+    ValueError: K must have positive focal lengths; got fx = -800, fy = -800 (with K[2, 2] = 1): ...
     """
     expected = "(3, 3)" if n_views is None else f"(3, 3) or ({n_views}, 3, 3)"
     a = _as_float_array(K, name, expected)
@@ -211,6 +261,10 @@ def as_calibration(K, name="K", n_views=None, like_name=None):
         det = np.linalg.det(Kn)
         if abs(det) <= 1e-12 * np.abs(Kn).max() ** 3:
             raise ValueError(f"{who} is singular (det = {det:.3g}): a calibration matrix must be invertible")
+        if Kn[0, 0] <= 0 or Kn[1, 1] <= 0:
+            raise ValueError(f"{who} must have positive focal lengths; got fx = {Kn[0, 0]:.6g}, fy = {Kn[1, 1]:.6g} "
+                             "(with K[2, 2] = 1): after an RQ split, flip the signs so that diag(K) > 0 "
+                             "(negate the columns of K and the rows of R together)")
     out = stack / stack[:, 2:3, 2:3]
     return out[0] if single and n_views is None else out.reshape(a.shape)
 
@@ -243,6 +297,98 @@ def as_fundamental(F, name="F"):
         raise ValueError(f"{name} does not have rank 2 (singular values {s / s[0]} after scaling): "
                          "enforce rank 2 first (H&Z Sec. 11.1.1)")
     return (U[:, :2] * (s[:2] / s[0])) @ Vt[:2] / np.linalg.norm(s[:2] / s[0]), Vt[2], U[:, 2]
+
+
+def as_essential(E, name="E", tol=1e-5):
+    """``E`` as a finite (3, 3) essential matrix, or ``ValueError``: singular values (s, s, 0) within ``tol``
+    relative (H&Z Result 9.17); ``E = I`` or a ``K2ᵀ F K1`` not projected onto the manifold is refused.
+
+    >>> as_essential(np.eye(3))
+    Traceback (most recent call last):
+    ...
+    ValueError: E is not an essential matrix: its singular values relative to the largest are [1. 1. 1.]; ...
+    """
+    E = as_matrix(E, name, (3, 3))
+    s = np.linalg.svd(E, compute_uv=False)
+    if s[0] == 0 or s[1] <= 1e-12 * s[0]:
+        raise ValueError(f"{name} has rank < 2 (singular values {s}): not an essential matrix")
+    if s[2] > tol * s[0] or s[0] - s[1] > tol * s[0]:
+        raise ValueError(f"{name} is not an essential matrix: its singular values relative to the largest are "
+                         f"{np.round(s / s[0], 6)}; an essential matrix has (1, 1, 0) (within {tol:g}); project it "
+                         "first (U diag(1, 1, 0) Vᵀ, as essential_from_fundamental does)")
+    return E
+
+
+def as_camera_matrix(P, name="P"):
+    """``P`` as a finite (3, 4) camera matrix of rank 3, or ``ValueError`` (a rank-deficient P has no centre).
+
+    >>> as_camera_matrix(np.outer([1.0, 2, 3], [1.0, 0, 0, 1]))
+    Traceback (most recent call last):
+    ...
+    ValueError: P has rank 1 (singular values [5.29 0.   0.  ]): a camera matrix has rank 3
+    """
+    P = as_matrix(P, name, (3, 4))
+    s = np.linalg.svd(P, compute_uv=False)
+    rank = int(np.sum(s > 1e-12 * s[0])) if s[0] > 0 else 0
+    if rank < 3:
+        raise ValueError(f"{name} has rank {rank} (singular values {np.round(s, 3)}): a camera matrix has rank 3")
+    return P
+
+
+def as_camera_matrices(Ps, name="Ps"):
+    """A ``(V, 3, 4)`` stack of finite camera matrices of rank 3, or ``ValueError`` naming the first bad one."""
+    a = _as_float_array(Ps, name, "(V, 3, 4)")
+    if a.ndim != 3 or a.shape[1:] != (3, 4):
+        raise ValueError(f"{name} must have shape (V, 3, 4); got shape {a.shape}")
+    return np.stack([as_camera_matrix(P, f"{name}[{k}]") for k, P in enumerate(a)]) if len(a) else a
+
+
+def as_indices(idx, name, n, *, length=None, like_name="camera_indices", what="item", holder=None):
+    """A 1-D int64 array of indices in ``0..n-1`` (``n`` ``what``s, held by the argument ``holder``; ``length``
+    entries, one per entry of ``like_name``, when given), or ``ValueError``. Integers only: a boolean mask is refused
+    (NumPy would read ``True``/``False`` as 1/0), and so are floats; an index out of range is named.
+
+    >>> as_indices(np.array([True, False]), "camera_indices", 3, what="camera")
+    Traceback (most recent call last):
+    ...
+    ValueError: camera_indices must hold integer indices of cameras (0..2); got a boolean array: ...
+    """
+    try:
+        a = np.asarray(idx)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be a 1-D array of integer indices of {what}s: {exc}") from None
+    if a.dtype.kind == "b":
+        raise ValueError(f"{name} must hold integer indices of {what}s (0..{n - 1}); got a boolean array: "
+                         "np.flatnonzero(mask) gives the indices of a mask")
+    if a.ndim != 1:
+        raise ValueError(f"{name} must be a 1-D array of integers; got shape {a.shape}")
+    if length is not None and a.shape[0] != length:
+        raise ValueError(f"{name} has {a.shape[0]} entries but {like_name} has {length}: one entry of each per "
+                         "observation")
+    if a.size and a.dtype.kind not in "iu":
+        raise ValueError(f"{name} must hold integers (indices of {what}s); got dtype {a.dtype}")
+    a = a.astype(np.int64)
+    bad = np.flatnonzero((a < 0) | (a >= n))
+    if bad.size:
+        held = f" ({holder} has {n})" if holder else ""
+        raise ValueError(f"{name}[{int(bad[0])}] = {int(a[bad[0]])} indexes a missing {what}: "
+                         f"there are {n} {what}s{held}, valid indices 0..{n - 1}; "
+                         f"{bad.size} entries are out of range")
+    return a
+
+
+def as_mask(mask, name, shape, like=None):
+    """A boolean mask of ``shape`` (bools, or numbers all 0 or 1), or ``ValueError`` (naming ``like``, whence the
+    shape, when given)."""
+    try:
+        a = np.asarray(mask)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be a boolean array of shape {shape}: {exc}") from None
+    if a.shape != tuple(shape) or a.dtype.kind not in "biuf" or (a.dtype.kind != "b" and a.size and
+                                                                  not np.all((a == 0) | (a == 1))):
+        raise ValueError(f"{name} must be a boolean array of shape {tuple(shape)}" + (f" (to match {like})" if like
+                         else "") + f"; got shape {a.shape}, dtype {a.dtype}")
+    return a.astype(bool)
 
 
 def as_rng(rng, name="rng"):
@@ -417,7 +563,8 @@ def as_cameras(K, R, t):
         raise ValueError("R and t must be finite (NaN rows mark views that are not registered); got inf")
     if not registered.any():
         raise ValueError("no view has a finite pose (R and t are all NaN)")
-    as_rotations(R[registered], "R")
+    R = R.copy()
+    R[registered] = as_rotations(R[registered], "R")
     as_translations(t[registered], "t")
     Ks = as_calibration(K, "K", n_views=len(R))
     return Ks, R, t, registered

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.cli import write_atomically
-from ..core.validation import as_tracks
+from ..core.validation import as_points, as_tracks
 
 
 def _numeric_rows(path, what):
@@ -158,7 +158,7 @@ def ply_text(X):
     end_header
     1.0 2.0 3.5
     """
-    X = np.asarray(X, float).reshape(-1, 3)
+    X = as_points(X, "X", dim=3, min_n=0)
     head = ["ply", "format ascii 1.0", "comment written by labutils", f"element vertex {len(X)}",
             "property double x", "property double y", "property double z", "end_header"]
     return "\n".join(head + [" ".join(repr(float(c)) for c in p) for p in X]) + "\n"

@@ -5,13 +5,15 @@ Where the files are looked for is :mod:`labutils.data.paths`; ``python -m labuti
 them (:mod:`labutils.data.fetch`) and ``python -m labutils.data list`` shows what is present.
 """
 
+import warnings
+
 import numpy as np
 import scipy.io
 
 from ..core.geometry import KRt_from_P
 from ..core.scene import Scene, Views, nan_tracks
 from ..core.synthetic import make_scene
-from ..core.validation import as_rng
+from ..core.validation import RotationProjectedWarning, as_rng, as_rotation
 from .middlebury import read_par
 from .paths import DataNotFoundError, find_data, how_to_get
 
@@ -118,14 +120,16 @@ def load_fountain():
     """
     folder = find_data("fountain-P11/gt_dense_cameras", FOUNTAIN_HELP).parent
     files = sorted((folder / "gt_dense_cameras").glob("*.jpg.camera"))
-    Ks, Rs, ts, paths = [], [], [], []
+    Ks, Rs, ts, paths, projected = [], [], [], [], [0.0]
     for f in files:
         v = np.array(f.read_text().split(), float)
         if v.size != 26:
             raise ValueError(f"{f}: expected 26 numbers (K, distortion, R, C, width, height); got {v.size}")
         K, R_c2w, C = v[:9].reshape(3, 3), v[12:21].reshape(3, 3), v[21:24]
-        U, _, Vt = np.linalg.svd(R_c2w)          # orthonormal to ~1e-6 in the file: take the nearest rotation
-        R_c2w = U @ Vt
+        with warnings.catch_warnings():                     # 1e-6 off SO(3) in the files: the nearest rotation
+            warnings.simplefilter("ignore", RotationProjectedWarning)
+            R_c2w, R_file = as_rotation(R_c2w, f"{f}: R"), R_c2w
+        projected.append(np.abs(R_c2w - R_file).max())
         Ks.append(K / K[2, 2])
         Rs.append(R_c2w.T)
         ts.append(-R_c2w.T @ C)
@@ -134,6 +138,10 @@ def load_fountain():
     if not files or missing:
         raise DataNotFoundError(f"fountain-P11 is incomplete: {len(files)} camera files, missing images "
                                 f"{[str(p) for p in missing[:3]]}\n" + FOUNTAIN_HELP)
+    if max(projected) > 0:
+        warnings.warn(f"{folder}: {sum(c > 0 for c in projected)} of {len(files)} rotations are off SO(3) by "
+                      f"round-off: replaced by the nearest rotations, largest correction {max(projected):.2g}",
+                      RotationProjectedWarning, stacklevel=2)
     return Views(name="fountain-P11", K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths,
                  image_size=(int(v[24]), int(v[25])))
 

@@ -10,6 +10,7 @@ with ``P = K [R | t]`` mapping world points to pixels (origin top-left, x right,
 Image names are relative to the file's folder.
 """
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -17,11 +18,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.scene import Views
+from ..core.validation import ROTATION_TOL, RotationProjectedWarning, as_calibration, as_rotation
 
 __all__ = ["read_par", "write_par"]
 
 
-def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol: float = 1e-6) -> Views:
+def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol: float = ROTATION_TOL) -> Views:
     """Read a Middlebury camera file into a :class:`labutils.core.Views` (K, R, t and image paths per view).
 
     Parameters
@@ -30,7 +32,10 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
     check_images : bool
         Check that every image exists beside the file.
     rotation_tol : float
-        Largest entry of ``R Rᵀ - I`` accepted.
+        Largest entry of ``R Rᵀ - I`` accepted (1e-4: the files print 6 digits); an R off by more than round-off
+        is replaced by the nearest rotation; one one-line
+        :class:`labutils.core.validation.RotationProjectedWarning` for the file reports how many and the largest
+        correction (and its line).
 
     Returns
     -------
@@ -41,7 +46,8 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
     ------
     ValueError
         ``<file>, line N: ...``: a first line that is not a positive image count; a line without a name and 21
-        numbers; a number that is not finite; a K whose last row is not ``0 0 k`` (k ≠ 0) or that is singular;
+        numbers; a number that is not finite; a K whose last row is not ``0 0 k`` (k ≠ 0), that is singular
+        or has a negative focal length;
         an R that is not a rotation; a repeated image name; fewer or more lines than announced; a missing image.
     FileNotFoundError
         If the file itself does not exist.
@@ -66,7 +72,7 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
         raise ValueError(f"{path}, line 1: expected the number of images (a positive integer); "
                          f"got {lines[0][:60] if lines else 'an empty file'!r}")
     n = int(first[0])
-    Ks, Rs, ts, names, paths = [], [], [], {}, []
+    Ks, Rs, ts, names, paths, projected = [], [], [], {}, [], []
     for k, line in enumerate(lines[1:], 2):
         tok = line.split()
         if not tok:
@@ -84,15 +90,13 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
             raise ValueError(f"{where}: {bad!r} is not a number") from None
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{where}: non-finite number (NaN or inf)")
-        K, R, t = v[:9].reshape(3, 3), v[9:18].reshape(3, 3), v[18:21]
-        if K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] == 0:
-            raise ValueError(f"{where}: the last row of K must be '0 0 k' with k != 0; got {K[2].tolist()}")
-        K = K / K[2, 2]
-        if abs(np.linalg.det(K)) <= 1e-12 * np.abs(K).max() ** 3:
-            raise ValueError(f"{where}: K is singular")
-        if np.abs(R @ R.T - np.eye(3)).max() > rotation_tol or np.linalg.det(R) < 0:
-            raise ValueError(f"{where}: R is not a rotation (orthonormal with det +1): max |R Rᵀ - I| = "
-                             f"{np.abs(R @ R.T - np.eye(3)).max():.2g}, det R = {np.linalg.det(R):.3g}")
+        K = as_calibration(v[:9].reshape(3, 3), f"{where}: K")
+        with warnings.catch_warnings():                  # one report for the file, below
+            warnings.simplefilter("ignore", RotationProjectedWarning)
+            R, t = as_rotation(v[9:18].reshape(3, 3), f"{where}: R", tol=rotation_tol), v[18:21]
+        change = np.abs(R - v[9:18].reshape(3, 3)).max()
+        if change > 0:
+            projected.append((change, k))
         if tok[0] in names:
             raise ValueError(f"{where}: image {tok[0]} is listed twice (also on line {names[tok[0]]})")
         names[tok[0]] = k
@@ -105,6 +109,12 @@ def read_par(path: str | os.PathLike, *, check_images: bool = True, rotation_tol
         paths.append(img)
     if len(paths) < n:
         raise ValueError(f"{path}, line 1: {n} images announced; the file lists {len(paths)}")
+    if projected:
+        change, k = max(projected)
+        warnings.warn(f"{path}: {len(projected)} of {n} rotations are off SO(3) by round-off (within "
+                      f"{rotation_tol:g}): replaced by the nearest rotations, largest correction {change:.2g} "
+                      f"(line {k})",
+                      RotationProjectedWarning, stacklevel=2)
     return Views(name=path.stem, K=np.stack(Ks), R=np.stack(Rs), t=np.stack(ts), image_paths=paths)
 
 

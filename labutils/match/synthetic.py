@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.synthetic import look_at
-from ..core.validation import as_points, as_rng
+from ..core.validation import as_count, as_image_size, as_points, as_rng
 
 __all__ = ["RenderedScene", "render_corner", "blob_texture", "look_at"]
 
@@ -179,9 +179,9 @@ def render_corner(n_views: int = 6, image_size: tuple[int, int] = (320, 240), *,
     import cv2
 
     as_rng(rng)
-    if int(n_views) < 2:
-        raise ValueError(f"n_views must be at least 2; got {n_views}")
-    w, h = (int(v) for v in image_size)
+    n_views = as_count(n_views, "n_views", 2)
+    texture_px = as_count(texture_px, "texture_px", 2)
+    w, h = as_image_size(image_size)
     f = 1.1 * w
     K = np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
     angles = np.radians(45.0 + np.linspace(-arc_deg / 2, arc_deg / 2, int(n_views)))

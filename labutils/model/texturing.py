@@ -27,6 +27,7 @@ from ..core.validation import (
     as_cameras,
     as_image,
     as_image_size,
+    as_indices,
     as_mesh,
     as_points,
     as_positive,
@@ -392,6 +393,9 @@ def held_out_error(views: VertexViews, held_out: Sequence[int], *, method: str =
     -------
     (len(held_out),) ndarray
     """
+    if not isinstance(views, VertexViews):
+        raise ValueError(f"views must be a VertexViews (from vertex_views); got {type(views).__name__}")
+    held_out = as_indices(held_out, "held_out", views.n_views, what="view")
     errs = []
     for h in held_out:
         tex = texture_vertices(views, method=method, exclude=[h])

@@ -26,7 +26,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 from numpy.typing import ArrayLike
 
-from ..core.validation import as_array, as_calibration, as_positive, as_rotations, as_tracks
+from ..core.validation import as_array, as_calibration, as_count, as_mask, as_positive, as_rotations, as_tracks
 from .rotation_averaging import as_pairs, as_weights
 
 
@@ -54,6 +54,9 @@ def _inputs(tracks, K, R, mask):
     if R.shape != (V, 3, 3):
         raise ValueError(f"R must have shape ({V}, 3, 3) like tracks (NaN for views to leave out); got {R.shape}")
     have = np.isfinite(R).all((1, 2))
+    if np.isinf(R).any() or (~have & np.isfinite(R).any((1, 2))).any():
+        raise ValueError("R must be finite rotations, or rows entirely NaN for the views to leave out; got inf or "
+                         "a partly NaN row")
     if have.sum() < 2:
         raise ValueError("R must hold at least two finite rotations (NaN rows leave views out)")
     R = R.copy()
@@ -63,10 +66,7 @@ def _inputs(tracks, K, R, mask):
     if mask is None:
         use = seen.copy()
     else:
-        m = as_array(mask, "mask", f"({V}, {T})")
-        if m.shape != (V, T) or not np.all((m == 0) | (m == 1)):
-            raise ValueError(f"mask must be a boolean array of shape ({V}, {T}) like tracks[..., 0]; got {m.shape}")
-        use = m.astype(bool) & seen
+        use = as_mask(mask, "mask", (V, T), like="tracks") & seen
     use[~have] = False
     return tracks, Ks, R, have, use
 
@@ -248,8 +248,7 @@ def robust_centres_from_points(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, ma
     tracks, Ks, R, have, use = _inputs(tracks, K, R, mask)
     threshold_px = as_positive(threshold_px, "threshold_px")
     min_angle_deg = as_positive(min_angle_deg, "min_angle_deg", allow_zero=True)
-    if not (isinstance(n_iter, (int, np.integer)) and n_iter >= 0):
-        raise ValueError(f"n_iter must be an integer >= 0; got {n_iter!r}")
+    n_iter = as_count(n_iter, "n_iter", 0)
     rays = np.nan_to_num(world_rays(tracks, Ks, R))
     f = np.sqrt(np.abs(Ks[:, 0, 0] * Ks[:, 1, 1]))[:, None]
     w = np.ones(use.shape)
@@ -286,10 +285,13 @@ def pair_directions(R: ArrayLike, pairs: ArrayLike, t_rel: ArrayLike) -> np.ndar
     array([[1., 0., 0.]])
     """
     R = as_rotations(R, "R")
+    if len(R) < 2:
+        raise ValueError(f"R must hold the rotations of at least two views; got {len(R)}")
     p = as_pairs(pairs, len(R))
     t = as_array(t_rel, "t_rel", f"({len(p)}, 3)")
     if t.shape != (len(p), 3) or not np.all(np.isfinite(t)):
-        raise ValueError(f"t_rel must be a finite ({len(p)}, 3) array, one translation per pair; got {t.shape}")
+        raise ValueError(f"t_rel must be a finite ({len(p)}, 3) array, one translation per row of pairs; got "
+                         f"{t.shape}")
     n = np.linalg.norm(t, axis=1)
     if not np.all(n > 0):
         raise ValueError(f"t_rel[{np.flatnonzero(~(n > 0))[0]}] is zero: a pair without a baseline has no direction")
@@ -335,7 +337,7 @@ def centres_from_directions(pairs: ArrayLike, directions: ArrayLike, n_views: in
     w = as_weights(weights, len(p))
     d = as_array(directions, "directions", f"({len(p)}, 3)")
     if d.shape != (len(p), 3) or not np.all(np.isfinite(d)):
-        raise ValueError(f"directions must be a finite ({len(p)}, 3) array, one per pair; got {d.shape}")
+        raise ValueError(f"directions must be a finite ({len(p)}, 3) array, one per row of pairs; got {d.shape}")
     n = np.linalg.norm(d, axis=1)
     if not np.all(n > 0):
         raise ValueError(f"directions[{np.flatnonzero(~(n > 0))[0]}] is zero: it has no direction")

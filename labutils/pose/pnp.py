@@ -21,7 +21,6 @@ from ..core.validation import (
     as_positive,
     as_rng,
     as_rotation,
-    as_vector3,
 )
 from .p3p_scalar import _lambda_twist
 
@@ -234,7 +233,19 @@ def pose_residuals(params, X, x, K, R0):
     >>> pose_residuals(np.zeros(6), X, X[:, :2] / X[:, 2:], K, np.eye(3))
     array([0., 0., 0., 0., 0., 0.])
     """
-    params = np.asarray(params, float)
+    return _pose_residuals(*_check_pose_problem(params, X, x, K, R0))
+
+
+def _check_pose_problem(params, X, x, K, R0):
+    """The arguments of :func:`pose_residuals` and :func:`pose_jacobian`, checked (``ValueError`` by name)."""
+    params = as_matrix(params, "params", (6,))
+    X = as_points(X, "X", dim=3)
+    x = as_points(x, "x", like=(X, "X"))
+    return params, X, x, as_calibration(K, "K"), as_rotation(R0, "R0")
+
+
+def _pose_residuals(params, X, x, K, R0):
+    """:func:`pose_residuals` on checked input (the kernel the LM loop calls)."""
     R = rotation_from_angle_axis(params[:3]) @ R0
     u = (X @ R.T + params[3:]) @ K.T
     return (u[:, :2] / u[:, 2:] - x).ravel()
@@ -251,7 +262,11 @@ def pose_jacobian(params, X, x, K, R0):
     >>> pose_jacobian(np.zeros(6), X, np.zeros((3, 2)), np.eye(3), np.eye(3)).shape
     (6, 6)
     """
-    params = np.asarray(params, float)
+    return _pose_jacobian(*_check_pose_problem(params, X, x, K, R0))
+
+
+def _pose_jacobian(params, X, x, K, R0):
+    """:func:`pose_jacobian` on checked input (the kernel the LM loop calls)."""
     w, t = params[:3], params[3:]
     E = rotation_from_angle_axis(w)
     RX = X @ (E @ R0).T                                   # (N, 3): R X
@@ -306,12 +321,12 @@ def pose_covariance(X: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLike, sigm
     X = as_points(X, "X", dim=3, min_n=3)
     K = as_calibration(K, "K")
     R = as_rotation(R, "R")
-    t = as_vector3(t, "t")
+    t = as_matrix(t, "t", (3,))
     sigma = as_positive(sigma, "sigma", allow_zero=True)
     depth = X @ R[2] + t[2]
     if not np.all(depth > 0):
         raise ValueError(f"X rows {np.flatnonzero(~(depth > 0))[:5].tolist()} are not in front of the camera (R, t)")
-    J = pose_jacobian(np.concatenate([np.zeros(3), t]), X, np.zeros((len(X), 2)), K, R)
+    J = _pose_jacobian(np.concatenate([np.zeros(3), t]), X, np.zeros((len(X), 2)), K, R)
     H = J.T @ J
     d = 1 / np.sqrt(np.diag(H))
     Hs = d[:, None] * H * d[None]                   # unit diagonal: radians and world units on one footing
@@ -379,7 +394,7 @@ def refine_pose(X: ArrayLike, x: ArrayLike, K: ArrayLike, R: ArrayLike, t: Array
         raise ValueError(f"{behind.size} of the {len(X)} points are behind the starting camera "
                          f"(rows {behind[:5].tolist()})")
     res = scipy.optimize.least_squares(
-        pose_residuals, np.concatenate([np.zeros(3), t0]), jac=pose_jacobian, args=(X, x, K, R0),
+        _pose_residuals, np.concatenate([np.zeros(3), t0]), jac=_pose_jacobian, args=(X, x, K, R0),
         method="lm" if loss == "linear" else "trf", loss=loss, f_scale=f_scale, max_nfev=max_nfev,
         x_scale="jac")
     R_new = rotation_from_angle_axis(res.x[:3]) @ R0

@@ -177,6 +177,8 @@ def aligned_rotation_errors_deg(R_est: ArrayLike, R_true: ArrayLike) -> np.ndarr
     if R_est.shape != R_true.shape:
         raise ValueError(f"R_est must have shape {R_true.shape} like R_true (NaN rows for views without an estimate); "
                          f"got {R_est.shape}")
+    if np.isinf(R_est).any():
+        raise ValueError("R_est has infinite entries (NaN rows mark views without an estimate)")
     ok = np.isfinite(R_est).all((1, 2))
     if not ok.any():
         raise ValueError("R_est has no finite rotation")
@@ -346,6 +348,8 @@ def refine_rotations(R0: ArrayLike, pairs: ArrayLike, R_rel: ArrayLike, weights:
     """
     R = as_rotations(R0, "R0").copy()
     V = len(R)
+    if V < 2:
+        raise ValueError(f"R0 must hold the rotations of at least two views; got {V}")
     pairs, R_rel, w = as_view_graph(pairs, R_rel, V, weights)
     anchor = _as_anchor(anchor, V)
     if loss not in LOSSES:

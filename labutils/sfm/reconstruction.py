@@ -9,7 +9,7 @@ from numpy.typing import ArrayLike
 from ..core.cli import write_atomically
 from ..core.metrics import align_cameras, apply_similarity, pose_errors
 from ..core.scene import CameraRig
-from ..core.validation import as_array, as_rotations, as_translations
+from ..core.validation import as_array, as_calibration, as_mask, as_rotations, as_tracks, as_translations
 
 
 @dataclass
@@ -116,8 +116,15 @@ def masked_reprojection_errors(K, R, t, X, tracks, mask):
     >>> masked_reprojection_errors(K, R, t, [[0.3, 0.4, 1.0], [0, 0, -1]], [[[0.0, 0.0], [0.0, 0.0]]], [[True, True]])
     array([[0.5, inf]])
     """
-    K, R, t, X = (np.asarray(a, float) for a in (K, R, t, X))
-    tracks, mask = np.asarray(tracks, float), np.asarray(mask, bool)
+    tracks = as_tracks(tracks)
+    V, N = tracks.shape[:2]
+    mask = as_mask(mask, "mask", (V, N), like="tracks")
+    unseen = mask & ~np.all(np.isfinite(tracks), axis=-1)
+    if unseen.any():
+        v, k = np.argwhere(unseen)[0]
+        raise ValueError(f"mask marks observation ({v}, {k}) that tracks does not have (NaN)")
+    K = as_calibration(K, "K", n_views=V, like_name="tracks")
+    R, t, X = _poses_and_points(R, t, X, mask)
     err = np.full(mask.shape, np.nan)
     cam, pt = np.nonzero(mask)
     c = np.einsum("nij,nj->ni", R[cam], X[pt]) + t[cam]
@@ -127,6 +134,29 @@ def masked_reprojection_errors(K, R, t, X, tracks, mask):
     e[~(c[:, 2] > 0)] = np.inf
     err[cam, pt] = e
     return err
+
+
+def _poses_and_points(R, t, X, mask):
+    """R ``(V, 3, 3)``, t ``(V, 3)`` and X ``(N, 3)`` for a ``(V, N)`` mask: the views and points the mask uses must
+    be finite (rotations and translations), the others may be NaN (not registered, not triangulated)."""
+    V, N = mask.shape
+    R, t, X = as_array(R, "R", f"({V}, 3, 3)"), as_array(t, "t", f"({V}, 3)"), as_array(X, "X", f"({N}, 3)")
+    if R.shape != (V, 3, 3):
+        raise ValueError(f"R must have shape ({V}, 3, 3) (one rotation per view of mask); got shape {R.shape}")
+    if t.shape != (V, 3):
+        raise ValueError(f"t must have shape ({V}, 3) (one translation per row); got shape {t.shape}"
+                         + (" — transposed?" if t.shape == (3, V) else ""))
+    if X.shape != (N, 3):
+        raise ValueError(f"X must have shape ({N}, 3) (one point per column of mask); got shape {X.shape}"
+                         + (" — transposed?" if X.shape == (3, N) else ""))
+    views, points = mask.any(axis=1), mask.any(axis=0)
+    R = R.copy()
+    R[views] = as_rotations(R[views], "R")
+    as_translations(t[views], "t")
+    bad = np.flatnonzero(points & ~np.all(np.isfinite(X), axis=1))
+    if bad.size:
+        raise ValueError(f"X has non-finite rows {bad[:5].tolist()} that mask uses")
+    return R, t, X
 
 
 def camera_errors(rec: "Reconstruction", R_true: ArrayLike, t_true: ArrayLike) -> tuple:
@@ -167,10 +197,14 @@ def align_reconstruction(rec, R_true, t_true):
     X : (T, 3) ndarray
         Poses and points after the similarity that best maps the registered centres onto the reference.
     """
+    if not isinstance(rec, Reconstruction):
+        raise ValueError(f"rec must be a Reconstruction (what incremental_sfm returns); got {type(rec).__name__}")
     reg = np.asarray(rec.registered, bool)
+    V = reg.size
+    R_true = as_rotations(as_array(R_true, "R_true", f"({V}, 3, 3)"), "R_true", n=V, like_name="rec.R")
+    t_true = as_translations(t_true, "t_true", n=V, like_name="rec.R")
     R, t = np.full_like(rec.R, np.nan), np.full_like(rec.t, np.nan)
-    R[reg], t[reg], sim = align_cameras(rec.R[reg], rec.t[reg], np.asarray(R_true, float)[reg],
-                                        np.asarray(t_true, float)[reg])
+    R[reg], t[reg], sim = align_cameras(rec.R[reg], rec.t[reg], R_true[reg], t_true[reg])
     return R, t, apply_similarity(sim, rec.X)
 
 

@@ -26,7 +26,7 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.validation import as_array, as_calibration, as_count, as_points, as_tracks
+from ..core.validation import as_array, as_calibration, as_count, as_mask, as_points, as_tracks
 from ..pose.pnp import pose_covariance  # noqa: F401  (re-exported: what the scores stand in for; defined beside pose_jacobian)
 from .initial_pair import two_view_reconstruction
 
@@ -117,12 +117,8 @@ def observation_extent(tracks: ArrayLike) -> np.ndarray:
 def _check(tracks, visible, registered, order):
     tracks = as_tracks(tracks)
     V, T = tracks.shape[:2]
-    vis = as_array(visible, "visible", f"({V}, {T})")
-    if vis.shape != (V, T) or not np.all((vis == 0) | (vis == 1)):
-        raise ValueError(f"visible must be a boolean array of shape ({V}, {T}) like tracks[..., 0]; got {vis.shape}")
-    reg = as_array(registered, "registered", f"({V},)")
-    if reg.shape != (V,) or not np.all((reg == 0) | (reg == 1)):
-        raise ValueError(f"registered must be a boolean array of shape ({V},); got {reg.shape}")
+    vis = as_mask(visible, "visible", (V, T), like="tracks")
+    reg = as_mask(registered, "registered", (V,), like="tracks")
     order = [int(v) for v in order]
     if any(not 0 <= v < V for v in order):
         raise ValueError(f"order must list views in 0..{V - 1}; got {order}")
@@ -238,6 +234,9 @@ def next_view(visible_points, registered, skip=(), scores=None, min_points=1):
     counts = as_array(visible_points, "visible_points", "(V,)")
     if counts.ndim != 1:
         raise ValueError(f"visible_points must have shape (V,) (one count per view); got shape {counts.shape}")
+    if not np.all(counts == np.round(counts)) or np.any(counts < 0):
+        raise ValueError(f"visible_points must be counts, integers >= 0 (one per view); got {counts.tolist()}")
+    min_points = as_count(min_points, "min_points", 1)
     V = len(counts)
     registered = np.asarray(registered)
     if registered.shape != (V,):

@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike
 from ..core.geometry import rotation_from_angle_axis, skew
 from ..core.lm import DenseLinearisation, minimise
 from ..core.ransac import ransac
-from ..core.validation import as_count, as_matrix, as_points, as_positive, as_rng
+from ..core.validation import as_array, as_count, as_fundamental, as_matrix, as_points, as_positive, as_rng
 
 H_TEST_MIN_POINTS = 50        # the homography-vs-F degeneracy test needs this many correspondences
 
@@ -119,6 +119,19 @@ def transform_points(T, x):
     >>> transform_points(np.diag([2.0, 2.0, 1.0]), np.array([[1.0, 3.0]]))
     array([[2., 6.]])
     """
+    T = as_matrix(T, "T", (3, 3))
+    if abs(np.linalg.det(T)) <= 1e-12 * np.abs(T).max() ** 3:
+        raise ValueError(f"T is singular (det = {np.linalg.det(T):.3g}): not a plane homography")
+    x = as_points(x, "x", min_n=0)
+    out = _transform_points(T, x)
+    if not np.all(np.isfinite(out)):
+        raise ValueError("T maps some of x to infinity (the line at infinity): rows "
+                         f"{np.flatnonzero(~np.all(np.isfinite(out), axis=1))[:5].tolist()}")
+    return out
+
+
+def _transform_points(T, x):
+    """:func:`transform_points` on checked input."""
     x_h = np.hstack([x, np.ones((len(x), 1))]) @ T.T
     return x_h[:, :2] / x_h[:, 2:]
 
@@ -129,6 +142,12 @@ def design_matrix(x1, x2):
     >>> design_matrix(np.array([[1.0, 2.0]]), np.array([[3.0, 4.0]]))
     array([[3., 6., 3., 4., 8., 4., 1., 2., 1.]])
     """
+    x1, x2 = check_pair(x1, x2, 1)
+    return _design_matrix(x1, x2)
+
+
+def _design_matrix(x1, x2):
+    """:func:`design_matrix` on checked input."""
     x1_h = np.hstack([x1, np.ones((len(x1), 1))])
     x2_h = np.hstack([x2, np.ones((len(x2), 1))])
     return (x2_h[:, :, None] * x1_h[:, None, :]).reshape(len(x1), 9)
@@ -142,6 +161,15 @@ def canonical_sign(F):
     array([[-0.,  1.],
            [-0., -0.]])
     """
+    F = as_array(F, "F", "(3, 3)")
+    if F.ndim != 2 or F.size == 0 or not np.all(np.isfinite(F)) or not np.any(F):
+        raise ValueError(f"F must be a finite, non-zero matrix (defined up to scale); got shape {F.shape}"
+                         + (", all zeros" if F.size and np.all(np.isfinite(F)) and not np.any(F) else ""))
+    return _canonical_sign(F)
+
+
+def _canonical_sign(F):
+    """:func:`canonical_sign` on checked input."""
     F = F / np.linalg.norm(F)
     return F * np.sign(F.flat[np.argmax(np.abs(F))])
 
@@ -199,7 +227,13 @@ def sampson_distance(F: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> np.ndarray:
     array([1.41421356])
     """
     F = as_matrix(F, "F", (3, 3))
+    as_fundamental(F, "F")                      # rank 2 (to 1e-7): F = 0 or I would make every match an inlier
     x1, x2 = check_pair(x1, x2, 1)
+    return _sampson(F, x1, x2)
+
+
+def _sampson(F, x1, x2):
+    """:func:`sampson_distance` on checked input (the kernel RANSAC calls on each hypothesis)."""
     x1_h = np.hstack([x1, np.ones((len(x1), 1))])
     x2_h = np.hstack([x2, np.ones((len(x2), 1))])
     Fx1 = x1_h @ F.T
@@ -238,7 +272,7 @@ def homography_dlt(x1: ArrayLike, x2: ArrayLike) -> tuple:
     """
     x1, x2 = check_pair(x1, x2, 4)
     T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
-    y1, y2 = transform_points(T1, x1), transform_points(T2, x2)
+    y1, y2 = _transform_points(T1, x1), _transform_points(T2, x2)
     n = len(y1)
     y1_h = np.hstack([y1, np.ones((n, 1))])
     A = np.zeros((2 * n, 9))
@@ -265,7 +299,7 @@ def homography_dlt(x1: ArrayLike, x2: ArrayLike) -> tuple:
 
 def _eight_point_normalised(y1, y2):
     """Rank-2 F from normalised points, and the singular values of the design matrix."""
-    s, Vt = _null_space_svd(design_matrix(y1, y2))
+    s, Vt = _null_space_svd(_design_matrix(y1, y2))
     return _enforce_rank2(Vt[-1].reshape(3, 3)), s
 
 
@@ -307,7 +341,7 @@ def epipole_search(x1: ArrayLike, x2: ArrayLike, n_dirs: int = 400, n_best: int 
     """
     x1, x2 = check_pair(x1, x2, 8)
     T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
-    A = design_matrix(transform_points(T1, x1), transform_points(T2, x2))
+    A = _design_matrix(_transform_points(T1, x1), _transform_points(T2, x2))
     AtA = A.T @ A
     i = np.arange(n_dirs) + 0.5
     z = i / n_dirs
@@ -335,7 +369,7 @@ def epipole_search(x1: ArrayLike, x2: ArrayLike, n_dirs: int = 400, n_best: int 
             chosen.append(m)
         if len(chosen) == n_best:
             break
-    return [canonical_sign(Fp[m]) for m in chosen]
+    return [_canonical_sign(Fp[m]) for m in chosen]
 
 
 def _sampson_and_gradient(F, x1_h, x2_h):
@@ -508,7 +542,7 @@ def gric_model_selection(x1: ArrayLike, x2: ArrayLike, sigma_px: float = None) -
         sigma_px = as_positive(sigma_px, "sigma_px")
     n = len(x1)
     T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
-    Fn8 = _eight_point_normalised(transform_points(T1, x1), transform_points(T2, x2))[0]
+    Fn8 = _eight_point_normalised(_transform_points(T1, x1), _transform_points(T2, x2))[0]
     starts = [Fn8 / np.linalg.norm(Fn8)]
     for F in epipole_search(x1, x2, n_dirs=200):
         Fn = np.linalg.inv(T2).T @ F @ np.linalg.inv(T1)
@@ -523,7 +557,7 @@ def gric_model_selection(x1: ArrayLike, x2: ArrayLike, sigma_px: float = None) -
     l1, l2 = np.log(4.0), np.log(4.0 * n)
     gric_F = e_F / sigma2 + l1 * 3 * n + l2 * 7
     gric_H = e_H / sigma2 + l1 * 2 * n + l2 * 8
-    return ModelSelection(n=n, F=canonical_sign(F), H=H, e_F=float(e_F), e_H=e_H, sigma=float(np.sqrt(sigma2)),
+    return ModelSelection(n=n, F=_canonical_sign(F), H=H, e_F=float(e_F), e_H=e_H, sigma=float(np.sqrt(sigma2)),
                           gric_F=float(gric_F), gric_H=float(gric_H))
 
 
@@ -569,13 +603,13 @@ def fundamental_8point(x1: ArrayLike, x2: ArrayLike, rank_tol: float = 1e-8, deg
         raise ValueError(f"degeneracy must be 'gric' or None; got {degeneracy!r}")
     x1, x2 = check_pair(x1, x2, 8)
     T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
-    Fn, s = _eight_point_normalised(transform_points(T1, x1), transform_points(T2, x2))
+    Fn, s = _eight_point_normalised(_transform_points(T1, x1), _transform_points(T2, x2))
     if s[7] < rank_tol * s[0]:
         raise ValueError(
             f"degenerate correspondences: the normalised 8-point design matrix has rank < 8 "
             f"(8th singular value {s[7] / s[0]:.1e} of the largest). A homography maps x1 to x2: all points "
             "on one plane, or zero baseline (pure rotation), or a critical configuration")
-    F = canonical_sign(T2.T @ Fn @ T1)
+    F = _canonical_sign(T2.T @ Fn @ T1)
     if degeneracy is not None and len(x1) >= H_TEST_MIN_POINTS:
         _raise_if_degenerate(x1, x2)
     return F
@@ -626,7 +660,7 @@ def _seven_point(x1, x2):
         T1, T2 = hartley_normalisation(x1), hartley_normalisation(x2)
     except ValueError:
         return []
-    s, Vt = _null_space_svd(design_matrix(transform_points(T1, x1), transform_points(T2, x2)))
+    s, Vt = _null_space_svd(_design_matrix(_transform_points(T1, x1), _transform_points(T2, x2)))
     if s[6] < 1e-8 * s[0]:
         return []
     F1, F2 = Vt[-2].reshape(3, 3), Vt[-1].reshape(3, 3)
@@ -638,7 +672,7 @@ def _seven_point(x1, x2):
     out = []
     for r in roots[np.abs(roots.imag) < 1e-9 * np.maximum(1.0, np.abs(roots.real))].real:
         F = T2.T @ _enforce_rank2(r * F1 + (1 - r) * F2) @ T1
-        out.append(canonical_sign(F))
+        out.append(_canonical_sign(F))
     return out
 
 
@@ -711,7 +745,7 @@ def fundamental_ransac(x1: ArrayLike, x2: ArrayLike, *, rng: np.random.Generator
     r1, r2 = x1.min(0) + u[:, :2] * np.ptp(x1, axis=0), x2.min(0) + u[:, 2:] * np.ptp(x2, axis=0)
     chance = lambda F: (np.sum(sampson_distance(F, r1, r2) < threshold_px) + 1) / (len(u) + 2)  # noqa: E731
     F, inliers, _ = ransac(len(x1), 7, lambda idx: _seven_point(x1[idx], x2[idx]),
-                           lambda F: sampson_distance(F, x1, x2), threshold_px, rng=rng,
+                           lambda F: _sampson(F, x1, x2), threshold_px, rng=rng,
                            confidence=confidence, max_iter=max_iter, chance=chance, max_p_chance=max_p_chance)
     tested = None
     for _ in range(refits):

@@ -7,8 +7,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
-from ..core.validation import as_calibration, as_matrix, as_rotation
-from .epipolar import canonical_sign, check_pair, sampson_distance, transform_points
+from ..core.validation import as_calibration, as_essential, as_fundamental, as_matrix, as_rotation
+from .epipolar import _canonical_sign, _transform_points, check_pair, sampson_distance
 from .triangulation import triangulate
 
 
@@ -30,7 +30,7 @@ def fundamental_from_pose(K1: ArrayLike, K2: ArrayLike, R: ArrayLike, t: ArrayLi
     t = as_matrix(t, "t", (3,))
     if not np.linalg.norm(t) > 0:
         raise ValueError("t is zero: with no baseline the two views are related by a homography and F is not defined")
-    return canonical_sign(np.linalg.inv(K2).T @ skew(t) @ R @ np.linalg.inv(K1))
+    return _canonical_sign(np.linalg.inv(K2).T @ skew(t) @ R @ np.linalg.inv(K1))
 
 
 def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np.ndarray:
@@ -59,6 +59,7 @@ def essential_from_fundamental(F: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> np
     array([1., 1., 0.])
     """
     F = as_matrix(F, "F", (3, 3))
+    as_fundamental(F, "F")
     K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
     U, s, Vt = np.linalg.svd(K2.T @ F @ K1)
     if s[1] <= 1e-12 * s[0]:
@@ -76,7 +77,8 @@ def decompose_essential(E: ArrayLike) -> list:
     Parameters
     ----------
     E : (3, 3) array_like
-        Essential matrix (any scale; projected onto the manifold by the SVD).
+        Essential matrix (any scale): singular values (s, s, 0) within 1e-5 relative
+        (:func:`labutils.core.validation.as_essential`).
 
     Returns
     -------
@@ -86,7 +88,7 @@ def decompose_essential(E: ArrayLike) -> list:
     Raises
     ------
     ValueError
-        If E is not finite, not 3×3, or has rank < 2.
+        If E is not finite, not 3×3, or not essential (``E = I``, rank < 2, unequal singular values).
 
     Examples
     --------
@@ -96,7 +98,7 @@ def decompose_essential(E: ArrayLike) -> list:
     >>> len(poses), any(np.allclose(R, R0) and np.allclose(t, t0) for R, t in poses)
     (4, True)
     """
-    E = as_matrix(E, "E", (3, 3))
+    E = as_essential(E, "E")
     U, s, Vt = np.linalg.svd(E)
     if s[0] == 0 or s[1] <= 1e-12 * s[0]:
         raise ValueError(f"E has rank < 2 (singular values {s}): not an essential matrix")
@@ -186,7 +188,7 @@ def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike,
     """
     x1, x2 = check_pair(x1, x2, 1)
     K1, K2 = as_calibration(K1, "K1"), as_calibration(K2, "K2")
-    y1, y2 = transform_points(np.linalg.inv(K1), x1), transform_points(np.linalg.inv(K2), x2)
+    y1, y2 = _transform_points(np.linalg.inv(K1), x1), _transform_points(np.linalg.inv(K2), x2)
     return _cheirality_counts(decompose_essential(E), y1, y2)
 
 

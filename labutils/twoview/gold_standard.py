@@ -14,12 +14,12 @@ from ..core.geometry import skew
 from ..core.lm import minimise
 from ..core.validation import as_count, as_fundamental, as_positive
 from .epipolar import (
-    canonical_sign,
+    _canonical_sign,
+    _transform_points,
     check_pair,
     epipole_search,
     fundamental_8point,
     hartley_normalisation,
-    transform_points,
 )
 from .triangulation import triangulate_optimal
 
@@ -90,14 +90,14 @@ class GoldStandardProblem:
         self.x1, self.x2, self.n = x1, x2, len(x1)
         self.T1, self.T2 = hartley_normalisation(x1), hartley_normalisation(x2)
         self.s1, self.s2 = self.T1[0, 0], self.T2[0, 0]
-        self.y1, self.y2 = transform_points(self.T1, x1), transform_points(self.T2, x2)
+        self.y1, self.y2 = _transform_points(self.T1, x1), _transform_points(self.T2, x2)
         Fn = np.linalg.inv(self.T2).T @ F0 @ np.linalg.inv(self.T1)
         Fn /= np.linalg.norm(Fn)
         e2 = np.linalg.svd(Fn)[0][:, 2]                      # left epipole: e2ᵀ F = 0
         P2 = np.hstack([skew(e2) @ Fn, e2[:, None]])         # H&Z Result 9.14
         x1_hat, x2_hat = triangulate_optimal(F0, x1, x2)
-        u = transform_points(self.T1, x1_hat)
-        z2 = np.hstack([transform_points(self.T2, x2_hat), np.ones((self.n, 1))])
+        u = _transform_points(self.T1, x1_hat)
+        z2 = np.hstack([_transform_points(self.T2, x2_hat), np.ones((self.n, 1))])
         # rho from z2 ~ M u_h + rho e: least squares on z2 × (M u_h + rho e) = 0
         Mu = np.hstack([u, np.ones((self.n, 1))]) @ P2[:, :3].T
         a, b = np.cross(z2, P2[:, 3]), np.cross(z2, Mu)
@@ -173,13 +173,13 @@ class GoldStandardProblem:
     def F(self, p):
         """The F of these parameters in pixels: ``F = T2ᵀ [e']× M T1`` with ``P2 = [M | e']`` (H&Z Result 9.9)."""
         P2 = p[:12].reshape(3, 4)
-        return canonical_sign(self.T2.T @ skew(P2[:, 3]) @ P2[:, :3] @ self.T1)
+        return _canonical_sign(self.T2.T @ skew(P2[:, 3]) @ P2[:, :3] @ self.T1)
 
     def points(self, p):
         """Corrected pixels ``x1_hat, x2_hat`` (N, 2): the reprojections of the current points."""
         _, q, _, y = self._project(p)
-        return (transform_points(np.linalg.inv(self.T1), q[:, :2]),
-                transform_points(np.linalg.inv(self.T2), y[:, :2] / y[:, 2:]))
+        return (_transform_points(np.linalg.inv(self.T1), q[:, :2]),
+                _transform_points(np.linalg.inv(self.T2), y[:, :2] / y[:, 2:]))
 
     def solve(self, p=None, max_iter=100, tol=1e-10):
         """Levenberg–Marquardt (the package's loop, :func:`labutils.core.lm.minimise`) with the Schur complement on

@@ -10,8 +10,10 @@ from ..core.lm import nielsen
 from ..core.validation import (
     as_array,
     as_calibration,
+    as_camera_matrices,
+    as_camera_matrix,
     as_fundamental,
-    as_matrix,
+    as_mask,
     as_points,
     as_positive,
     as_rotations,
@@ -54,7 +56,7 @@ def triangulate(P1: ArrayLike, P2: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> n
     >>> triangulate(P1, P2, [[0.2, 0.1]], [[0.0, 0.1]])
     array([[1. , 0.5, 5. ]])
     """
-    P1, P2 = as_matrix(P1, "P1", (3, 4)), as_matrix(P2, "P2", (3, 4))
+    P1, P2 = as_camera_matrix(P1, "P1"), as_camera_matrix(P2, "P2")
     x1 = as_points(x1, "x1")
     x2 = as_points(x2, "x2", like=(x1, "x1"))
     C = _centres_h(np.stack([P1, P2]))
@@ -103,15 +105,16 @@ def triangulate_multiview(Ps: ArrayLike, xs: ArrayLike) -> np.ndarray:
     >>> np.round(triangulate_multiview(Ps, xs), 9)
     array([[1. , 0.5, 5. ]])
     """
-    Ps = as_array(Ps, "Ps", "(V, 3, 4)")
-    if Ps.ndim != 3 or Ps.shape[1:] != (3, 4):
-        raise ValueError(f"Ps must have shape (V, 3, 4); got {Ps.shape}")
-    if not np.all(np.isfinite(Ps)):
-        raise ValueError("Ps has non-finite entries")
+    Ps = as_camera_matrices(Ps, "Ps")
     xs = as_tracks(xs, "xs")
     if xs.shape[0] != Ps.shape[0]:
         raise ValueError(f"xs must have shape (V, N, 2) with V = {Ps.shape[0]} (one row of pixels per camera of Ps); "
                          f"got {xs.shape}")
+    return _triangulate_multiview(Ps, xs)
+
+
+def _triangulate_multiview(Ps, xs):
+    """:func:`triangulate_multiview` on checked input (cameras that see nothing may be zero)."""
     seen = np.all(np.isfinite(xs), axis=-1)                      # (V, N)
     C = _centres_h(Ps)
     same = np.minimum(np.linalg.norm(C[:, None] - C[None], axis=-1),
@@ -346,7 +349,11 @@ def ray_angles_deg(C: ArrayLike, X: ArrayLike, mask: ArrayLike) -> np.ndarray:
     >>> np.round(ray_angles_deg(C, [[1, 0, 1], [1, 0, 1]], [[1, 1], [0, 1], [1, 0]]), 6)
     array([90., 45.])
     """
-    C, X, mask = np.asarray(C, float), np.asarray(X, float), np.asarray(mask, bool)
+    C, X = as_array(C, "C", "(V, 3)"), as_array(X, "X", "(T, 3)")
+    mask = as_mask(mask, "mask", C.shape[:1] + X.shape[:1], like="the rows of C and X")
+    for name, a, used in (("C", C, mask.any(axis=1)), ("X", X, mask.any(axis=0))):
+        if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a[used])):
+            raise ValueError(f"{name} must have shape (N, 3), finite in the rows mask uses; got shape {a.shape}")
     n = mask.sum(0)
     angle = np.full(X.shape[0], np.nan)
     order = np.argsort(~mask, axis=0, kind="stable")                      # observing views first
@@ -494,12 +501,10 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     if np.unique(views).size < 2:
         raise ValueError(f"views must list at least two different views to triangulate from; got {views.tolist()}")
     views = views.astype(int)
-    as_rotations(R[views], "R[views]")
+    R = R.copy()
+    R[views] = as_rotations(R[views], "R[views]")
     as_translations(t[views], "t[views]")
-    mask = as_array(mask, "mask", f"({V}, {N})")
-    if mask.shape != (V, N) or not np.all((mask == 0) | (mask == 1)):
-        raise ValueError(f"mask must be a boolean array of shape ({V}, {N}) like tracks[..., 0]; got {mask.shape}")
-    mask = mask.astype(bool)
+    mask = as_mask(mask, "mask", (V, N), like="tracks")
     threshold_px = as_positive(threshold_px, "threshold_px", allow_inf=True)
     min_angle_deg = as_positive(min_angle_deg, "min_angle_deg", allow_zero=True)
     use = np.zeros((V, N), bool)
@@ -568,7 +573,7 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     for _ in range(2):
         todo = np.flatnonzero(cons.sum(0) >= 2)
         X[todo] = _refine_points(Ps, xs[:, todo], cons[:, todo],
-                                 triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan)))
+                                 _triangulate_multiview(Ps, np.where(cons[:, todo, None], xs[:, todo], np.nan)))
         cam, pt = np.nonzero(use[:, todo])
         cons[:, todo] = False
         e = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])
@@ -578,7 +583,7 @@ def triangulate_tracks(tracks: ArrayLike, K: ArrayLike, R: ArrayLike, t: ArrayLi
     todo = np.flatnonzero(use.sum(0) >= 2)
     while todo.size:
         X[todo] = _refine_points(Ps, xs[:, todo], use[:, todo],
-                                 triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan)))
+                                 _triangulate_multiview(Ps, np.where(use[:, todo, None], xs[:, todo], np.nan)))
         cam, pt = np.nonzero(use[:, todo])
         err = np.full((V, todo.size), -1.0)
         err[cam, pt] = errors(np.nan_to_num(X[todo[pt]]), cam, todo[pt])

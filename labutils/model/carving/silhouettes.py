@@ -13,6 +13,8 @@ __all__ = ["QUANTISATION", "BackgroundModel", "background_model", "colour_distan
 
 def _as_number(value, name, *, lo=None, hi=None, integer=False, open_lo=False):
     """A finite float (or int) within [lo, hi] (``open_lo``: lo excluded), else ``ValueError`` naming ``name``."""
+    if isinstance(value, (bool, np.bool_, complex, np.complexfloating)):   # True is not 1, 1+2j not 1
+        raise ValueError(f"{name} must be a number; got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -35,7 +37,10 @@ def _as_image(image, name="image"):
 
 
 def _as_mask(mask, name="mask", shape=None):
-    a = np.asarray(mask)
+    try:
+        a = np.asarray(mask)
+    except ValueError:
+        raise ValueError(f"{name} must be a (H, W) boolean mask; got a ragged list") from None
     if a.ndim != 2 or a.size == 0 or (a.dtype != bool and not (a.dtype.kind in "iu" and a.max() <= 1
                                                                 and a.min() >= 0)):
         raise ValueError(f"{name} must be a (H, W) boolean mask with H, W > 0; got shape {a.shape} and dtype {a.dtype}")

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ...core.geometry import KRt_from_P
-from ...core.validation import as_matrix, as_points
+from ...core.validation import as_array, as_matrix, as_points
 from .silhouettes import _as_mask, _as_number, signed_distance_map
 
 __all__ = ["VoxelGrid", "Carving", "project_with_depth", "inside_silhouette", "carve", "bounding_box_from_silhouettes"]
@@ -99,7 +99,7 @@ class Carving:
 
 
 def _as_cameras(P, name="P"):
-    P = np.asarray(P, dtype=float)
+    P = as_array(P, name, "(V, 3, 4)")
     if P.ndim == 2:
         P = P[None]
     if P.ndim != 3 or P.shape[1:] != (3, 4):

@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike
 from ...calibrate.rectification import Rectification, rectify_fusiello
 from ...core.geometry import camera_center, relative_pose
 from ...core.validation import (
+    as_array,
     as_calibration,
     as_points,
     as_positive,
@@ -298,7 +299,7 @@ def depth_map_from_disparity(disparity: ArrayLike, pair: RectifiedPair) -> Depth
     if not isinstance(pair, RectifiedPair):
         raise ValueError(f"pair must be a RectifiedPair (from rectify_pair); got {type(pair).__name__}")
     try:
-        d = np.asarray(disparity, dtype=float)
+        d = as_array(disparity, "disparity", "(h, w)")
     except (TypeError, ValueError):
         d = None
     if d is None or d.shape != pair.image1.shape[:2]:

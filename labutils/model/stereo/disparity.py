@@ -31,7 +31,7 @@ Conventions: images are rectified, ``(h, w)`` grey or ``(h, w, 3)`` RGB (grey le
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...core.validation import as_positive
+from ...core.validation import as_array, as_positive
 
 __all__ = ["as_grey", "box_mean", "zncc", "zncc_volume", "disparity_plane_sweep", "left_right_check"]
 
@@ -47,7 +47,7 @@ def as_grey(image: ArrayLike, name: str = "image") -> np.ndarray:
     ValueError: image must be an (h, w) grey or (h, w, 3) RGB image; got shape (1, 3, 4)
     """
     try:
-        a = np.asarray(image, dtype=float)
+        a = as_array(image, name, "(h, w) or (h, w, 3)")
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be an (h, w) grey or (h, w, 3) RGB image (numeric)") from None
     if a.ndim == 3 and a.shape[2] == 3:
@@ -95,7 +95,7 @@ def box_mean(image: ArrayLike, window: int) -> np.ndarray:
     """
     k = _as_radius(window)
     try:
-        a = np.asarray(image, dtype=float)
+        a = as_array(image, "image", "(h, w)")
     except (TypeError, ValueError):
         raise ValueError("image must be a numeric (h, w) array") from None
     if a.ndim != 2:
@@ -131,7 +131,7 @@ def zncc(patch1: ArrayLike, patch2: ArrayLike) -> float:
     (1.0, -1.0)
     """
     try:
-        a, b = np.asarray(patch1, dtype=float), np.asarray(patch2, dtype=float)
+        a, b = as_array(patch1, "patch1", "(h, w)"), as_array(patch2, "patch2", "(h, w)")
     except (TypeError, ValueError):
         raise ValueError("patch1 and patch2 must be numeric arrays of the same shape") from None
     if a.shape != b.shape or a.size < 2:
@@ -298,10 +298,7 @@ def disparity_plane_sweep(left: ArrayLike, right: ArrayLike, d_min: int, d_max: 
 
 
 def _as_disparity_map(d, name):
-    try:
-        a = np.asarray(d, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be an (h, w) disparity map (NaN where invalid)") from None
+    a = as_array(d, name, "(h, w) (NaN where invalid)")
     if a.ndim != 2:
         raise ValueError(f"{name} must be an (h, w) disparity map (NaN where invalid); got shape {a.shape}")
     if np.isinf(a).any():

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ...core.validation import as_count, as_positive, as_rng
+from ...core.validation import as_count, as_image_size, as_positive, as_rng
 
 __all__ = ["LayeredPair", "make_layered_pair"]
 
@@ -78,7 +78,7 @@ def make_layered_pair(*, rng: np.random.Generator, image_size: tuple = (160, 120
     ((120, 160), 20, True)
     """
     rng = as_rng(rng)
-    w, h = (as_count(v, "image_size", 16) for v in image_size)
+    w, h = as_image_size(image_size, minimum=16)
     d_bg = as_count(d_background, "d_background", 0)
     ds = [as_count(d, "d_layers", d_bg + 1) for d in d_layers]
     noise = as_positive(noise, "noise", allow_zero=True)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ...core.geometry import angle_axis_from_rotation
 from ...core.validation import (
+    as_array,
     as_calibration,
     as_count,
     as_matrix,
@@ -71,7 +72,7 @@ def nees(errors, cov):
     >>> nees([[1.0, 0.0], [0.0, 2.0]], np.diag([1.0, 4.0]))
     array([1., 1.])
     """
-    cov = np.asarray(cov, float)
+    cov = as_array(cov, "cov", "(d, d)")
     if cov.ndim != 2 or cov.shape[0] != cov.shape[1] or not np.all(np.isfinite(cov)):
         raise ValueError(f"cov must be a finite square (d, d) matrix; got shape {cov.shape}")
     e = as_points(errors, "errors", dim=cov.shape[0])
@@ -122,7 +123,10 @@ def one_camera_trials(X, x_true, K, R, t, sigmas, n_trials, *, rng, threshold_si
     R = as_rotation(R, "R")
     t = as_matrix(t, "t", (3,))
     n_trials = as_count(n_trials, "n_trials", 1)
-    sigmas = [as_positive(s, "sigmas") for s in np.atleast_1d(np.asarray(sigmas, float))]
+    sigmas = as_array(sigmas, "sigmas", "(S,)")
+    if sigmas.ndim != 1 or sigmas.size == 0:
+        raise ValueError(f"sigmas must be a non-empty 1-D array of pixel noises; got shape {sigmas.shape}")
+    sigmas = [as_positive(float(s), "sigmas") for s in sigmas]
     out = {}
     for s in sigmas:
         Rs, ts = np.empty((n_trials, 3, 3)), np.empty((n_trials, 3))

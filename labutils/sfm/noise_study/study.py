@@ -13,7 +13,16 @@ import numpy as np
 from ...bundle.adjust import bundle_adjust
 from ...core.metrics import pose_errors
 from ...core.scene import observations
-from ...core.validation import as_calibration, as_fraction, as_positive, as_rng, as_tracks
+from ...core.validation import (
+    as_array,
+    as_calibration,
+    as_count,
+    as_fraction,
+    as_indices,
+    as_positive,
+    as_rng,
+    as_tracks,
+)
 from ...pose.pnp import pnp_ransac
 from ...twoview.triangulation import triangulate_tracks
 from ..initial_pair import two_view_reconstruction
@@ -97,6 +106,9 @@ def ba_from_truth(scene, x_meas, *, loss="linear", f_scale=1.0, threshold_px=Non
     R0 = scene.R if R0 is None else R0
     t0 = scene.t if t0 is None else t0
     X0 = scene.X if X0 is None else X0
+    x_meas = as_tracks(x_meas, "x_meas")
+    if x_meas.shape != np.shape(scene.x_true):
+        raise ValueError(f"x_meas must have shape {np.shape(scene.x_true)} like scene.x_true; got {x_meas.shape}")
     ci, pi, x2d = observations(x_meas)
     tic = time.perf_counter()
     res = bundle_adjust(R0, t0, X0, ci, pi, x2d, scene.K, loss=loss, f_scale=f_scale, max_iter=max_iter, tol=tol)
@@ -158,7 +170,8 @@ def reconstruct_without_ba(tracks, K, order, *, rng, threshold_px=10.0, min_angl
     as_rng(rng)
     tracks = as_tracks(tracks, min_views=2)
     V, T = tracks.shape[:2]
-    order = [int(v) for v in order]
+    order = as_indices(list(order) if isinstance(order, (list, tuple, range)) else order, "order", V, what="view")
+    order = order.tolist()
     if len(order) < 2 or len(set(order)) != len(order) or min(order) < 0 or max(order) >= V:
         raise ValueError(f"order must list at least two different views in 0..{V - 1}")
     Ks = as_calibration(K, "K", n_views=V)
@@ -207,10 +220,15 @@ def refine_reconstruction(rec, tracks, K, *, tol=1e-10, max_iter=50):
     t : (V, 3) ndarray
         NaN for the views that were not registered.
     """
+    tracks = as_tracks(tracks)
+    if tracks.shape[:2] != np.shape(rec.inliers):
+        raise ValueError(f"tracks must have shape {np.shape(rec.inliers) + (2,)} like the reconstruction's; got "
+                         f"{tracks.shape}")
+    max_iter = as_count(max_iter, "max_iter", 1)
     cams = np.flatnonzero(rec.registered)
     pts = np.flatnonzero(rec.inliers[cams].any(0))
     ci, pi = np.nonzero(rec.inliers[np.ix_(cams, pts)])
-    x = np.asarray(tracks, float)[cams[ci], pts[pi]]
+    x = tracks[cams[ci], pts[pi]]
     # gauge=None: the errors are measured after alignment, and (at the time of writing) the LM-Schur
     # solver's default gauge moves an exact solution by ~1e-6 degrees
     res = bundle_adjust(rec.R[cams], rec.t[cams], rec.X[pts], ci, pi, x, K, tol=tol, max_iter=max_iter, gauge=None)
@@ -221,6 +239,13 @@ def refine_reconstruction(rec, tracks, K, *, tol=1e-10, max_iter=50):
 
 def rms_errors(rot_deg, centre_rel, axis=None):
     """RMS of per-camera errors (NaN-aware), e.g. over cameras and trials: ``(rot, centre)``."""
+    rot_deg, centre_rel = as_array(rot_deg, "rot_deg", "(V,) or (trials, V)"), \
+        as_array(centre_rel, "centre_rel", "(V,) or (trials, V)")
+    if rot_deg.shape != centre_rel.shape or rot_deg.size == 0:
+        raise ValueError(f"rot_deg and centre_rel must have one shape (NaN for views not registered); got "
+                         f"{rot_deg.shape} and {centre_rel.shape}")
+    if np.isinf(rot_deg).any() or np.isinf(centre_rel).any() or (np.isnan(rot_deg) != np.isnan(centre_rel)).any():
+        raise ValueError("rot_deg and centre_rel must be finite, NaN together where a view was not registered")
     return (np.sqrt(np.nanmean(np.square(rot_deg), axis=axis)),
             np.sqrt(np.nanmean(np.square(centre_rel), axis=axis)))
 
@@ -231,7 +256,7 @@ def loglog_slope(sigmas, errors):
     >>> round(loglog_slope([0.5, 1, 2], [0.1, 0.2, 0.4]), 12)
     1.0
     """
-    s, e = np.asarray(sigmas, float), np.asarray(errors, float)
+    s, e = as_array(sigmas, "sigmas", "(n,)"), as_array(errors, "errors", "(n,)")
     if s.shape != e.shape or s.ndim != 1 or s.size < 2:
         raise ValueError(f"sigmas and errors must be two 1-D arrays of the same length >= 2; got shapes {s.shape} "
                          f"and {e.shape}")
