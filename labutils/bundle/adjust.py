@@ -262,7 +262,8 @@ def bundle_adjust_params(camera_params: ArrayLike, points_3d: ArrayLike, camera_
         raise ValueError(f"the starting point projects to non-finite pixels for observation(s) {bad[:5].tolist()} "
                          "(a point at a camera's centre?)")
     if Ks is not None:                      # pinhole: every observed point must start in front of its camera
-        behind = np.flatnonzero(_depths(cp, X, ci, pi) <= 0)
+        depth = _depths(cp, X, ci, pi)            # at the centre to rounding (1e-9 of the scene's depths) counts
+        behind = np.flatnonzero(depth <= 1e-9 * np.median(np.abs(depth)))
         if behind.size:
             raise ValueError(f"{behind.size} of {ci.size} observations start with the point behind (or at) the "
                              f"camera (observations {behind[:5].tolist()}, e.g. point {pi[behind[0]]} in camera "

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 
 from ..core.lm import minimise
 from ..core.robust import CURVATURE_FLOOR, SECOND_ORDER_AFTER, rho
-from ..core.validation import as_positive
+from ..core.validation import as_count, as_positive
 from .reprojection import check_problem, project_observations, reprojection_residuals
 
 
@@ -488,6 +488,8 @@ def levenberg_marquardt(camera_params: ArrayLike, points_3d: ArrayLike, camera_i
     """
     cp, X, ci, pi, x, Ks = check_problem(camera_params, points_3d, camera_indices, point_indices, points_2d, K)
     mu = as_positive(mu, "mu")
+    max_iter = as_count(max_iter, "max_iter")
+    tol = as_positive(tol, "tol", allow_zero=True)
     cost = 0.5 * float(np.sum(reprojection_residuals(cp, X, ci, pi, x, K) ** 2))
     costs = [cost]
     for _ in range(int(max_iter)):

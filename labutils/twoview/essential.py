@@ -7,7 +7,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
-from ..core.validation import as_calibration, as_essential, as_fundamental, as_matrix, as_rotation
+from ..core.validation import as_calibration, as_essential, as_fundamental, as_matrix, as_points, as_rotation
 from .epipolar import _canonical_sign, _transform_points, check_pair, sampson_distance
 from .triangulation import triangulate
 
@@ -154,7 +154,8 @@ def cheirality_choice(poses: list, y1: ArrayLike, y2: ArrayLike) -> tuple:
     >>> bool(np.allclose(R, R_true))
     True
     """
-    y1, y2 = check_pair(y1, y2, 1)
+    y1 = as_points(y1, "y1", min_n=5)              # a vote needs voters: five, the minimum that fixes E
+    y2 = as_points(y2, "y2", like=y1)
     poses = list(poses)
     if not poses:
         raise ValueError("poses must hold at least one (R, t) candidate, got none")

@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
 from ..core.lm import minimise
-from ..core.validation import as_count, as_fundamental, as_positive
+from ..core.validation import as_count, as_fundamental, as_matrix, as_points, as_positive
 from .epipolar import (
     _canonical_sign,
     _transform_points,
@@ -50,8 +50,18 @@ def gold_standard_residuals(P2: ArrayLike, points: ArrayLike, x1: ArrayLike, x2:
     >>> gold_standard_residuals(P2, np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 2)), np.zeros((1, 2)))
     array([0., 0., 1., 0.])
     """
+    P2 = as_matrix(P2, "P2", (3, 4))
+    if np.linalg.matrix_rank(P2) < 3:
+        raise ValueError("P2 must have rank 3 (a camera [M | e']); it has lower rank")
+    points = as_points(points, "points", dim=3)
+    x1 = as_points(x1, "x1")
+    if len(x1) != len(points):
+        raise ValueError(f"x1 has {len(x1)} rows for the {len(points)} rows of points: one per correspondence")
+    x2 = as_points(x2, "x2", like=x1)
     X = np.column_stack([points[:, 0], points[:, 1], np.ones(len(points)), points[:, 2]])
     y = X @ P2.T
+    if np.any(np.abs(y[:, 2]) < 1e-12 * np.abs(y).max(axis=1)):
+        raise ValueError("points has a point that P2 maps to infinity in view 2 (third coordinate 0)")
     return np.hstack([points[:, :2] - x1, y[:, :2] / y[:, 2:] - x2]).ravel()
 
 

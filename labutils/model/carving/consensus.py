@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ...core.validation import as_array
 from .silhouettes import BackgroundModel, _as_number, background_model, clean_mask, colour_distance
 from .surface import silhouette_ious, surface_mesh
 from .voxels import VoxelGrid, _as_cameras, _carve_maps, bounding_box_from_silhouettes, signed_distance_map
@@ -74,6 +75,15 @@ def refine_mask(image: ArrayLike, mask: ArrayLike, *, iterations: int = 3) -> np
     return (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
 
 
+def _as_distance_map(d, name):
+    """A finite real (H, W) colour-distance map, or ``ValueError`` naming it."""
+    a = as_array(d, name, "(H, W)")
+    if a.ndim != 2 or a.size == 0 or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be a finite (H, W) map of colour distances; got shape {a.shape}"
+                         + ("" if a.ndim != 2 or a.size == 0 else " with NaN or inf"))
+    return a
+
+
 def threshold_ladder(threshold: float, steps: int = 11) -> np.ndarray:
     """Candidate thresholds ``threshold · 2^(k/2)``, k = 0 … steps - 1: from the border's false-alarm threshold
     (the most inclusive one that makes sense) up to 32 times it, in steps of √2.
@@ -134,7 +144,7 @@ def choose_threshold(distances: Sequence[ArrayLike], P: ArrayLike, candidates: S
         If no candidate leaves a non-empty carving.
     """
     P = _as_cameras(P)
-    distances = list(distances)
+    distances = [_as_distance_map(d, f"distances[{i}]") for i, d in enumerate(distances)]
     if len(distances) != len(P):
         raise ValueError(f"distances has {len(distances)} maps for {len(P)} cameras: one per view")
     candidates = sorted(_as_number(c, "candidates", lo=0) for c in candidates)
@@ -284,7 +294,7 @@ def segment_views(images: Sequence[ArrayLike], P: ArrayLike, *, model: Backgroun
     P = _as_cameras(P)
     images = list(images)
     if len(images) != len(P):
-        raise ValueError(f"images has {len(images)} views for {len(P)} cameras: one per view")
+        raise ValueError(f"images has {len(images)} views for the {len(P)} cameras of P: one per view")
     if model is None:
         model = background_model(images)
     elif not isinstance(model, BackgroundModel):
