@@ -107,6 +107,14 @@ def test_notebook_is_what_the_git_filter_stores(path):
         f"run `python -m nbstripout --keep-id --extra-keys \"{' '.join(settings.EXTRA_KEYS)}\" {path}` and commit it"
 
 
+@pytest.mark.parametrize("path", CODE_NOTEBOOKS, ids=lambda p: p.split("/")[-1])
+def test_notebook_names_its_kernel(path):
+    """Issue 19: without ``metadata.kernelspec`` JupyterLab opens each notebook with a "Select Kernel" dialog; the
+    filter keeps it, and every notebook names the plain ``python3`` kernel (the environment it is opened from)."""
+    spec = json.loads(NOTEBOOKS[path]).get("metadata", {}).get("kernelspec", {})
+    assert spec.get("name") == "python3" and spec.get("language") == "python", f"{path}: kernelspec {spec!r}"
+
+
 def test_gitattributes_route_notebooks_through_the_filter():
     text = _blob(".gitattributes").decode() if WHERE == "git index" else (ROOT / ".gitattributes").read_text()
     lines = [line.strip() for line in text.splitlines()]

@@ -10,10 +10,11 @@ then sets the two things that command has no option for:
 
 - ``--keep-id`` on the filter: JupyterLab keeps cell ids stable; nbstripout would otherwise renumber them and
   rewrite every notebook once;
-- ``filter.nbstripout.extrakeys``: also drop the kernel and language metadata (``metadata.kernelspec``,
-  ``metadata.language_info``) that JupyterLab rewrites on every save.
+- ``filter.nbstripout.extrakeys``: also drop the language metadata (``metadata.language_info``, with the Python
+  version) that JupyterLab rewrites on every save. The kernel (``metadata.kernelspec``: ``python3``) is kept: without
+  it JupyterLab opens every notebook with a "Select Kernel" dialog.
 
-From then on ``git diff`` compares notebooks without outputs, execution counts or that metadata (a notebook you
+From then on ``git diff`` compares notebooks without outputs, execution counts or the language metadata (a notebook you
 ran and saved shows no change), and ``git add`` stores them stripped. Your working copy keeps its outputs.
 ``git status`` may still list a notebook you only ran and saved as modified: git sees the file's size change before
 it asks the filter (a limit of git's clean filters); ``git add`` it, and ``git status`` has nothing to commit.
@@ -25,7 +26,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-EXTRA_KEYS = ["metadata.kernelspec", "metadata.language_info"]     # rewritten by JupyterLab on every save
+EXTRA_KEYS = ["metadata.language_info"]     # rewritten by JupyterLab on every save (the kernelspec is kept)
 CLEAN_FLAGS = ["--keep-id"]
 # nbstripout 0.9's own default keys (in its main()); with EXTRA_KEYS, what the filter drops besides outputs and counts
 NBSTRIPOUT_DEFAULT_KEYS = ["metadata.signature", "metadata.widgets", "cell.metadata.collapsed",
