@@ -121,7 +121,7 @@ def test_bad_input_raises_naming_the_argument(scene):
         (lambda: background_model(scene.images[:2], border_px=0), "border_px must be >= 1"),
         (lambda: background_model(scene.images[:2], n_clusters=0), "n_clusters must be >= 1"),
         (lambda: background_model(scene.images[:2], false_alarm=0), "false_alarm must be > 0"),
-        (lambda: segment_views(scene.images[:3], P), "images has 3 views for 16 cameras"),
+        (lambda: segment_views(scene.images[:3], P), "images has 3 views for the 16 cameras of P"),
         (lambda: unsure_views([[0.9]]), r"agreement must be a \(V,\) array"),
         (lambda: threshold_ladder(0.0), "threshold must be > 0"),
         (lambda: background_model([]), "images is empty"),

@@ -145,6 +145,7 @@ def cheirality_choice(poses: list, y1: ArrayLike, y2: ArrayLike) -> tuple:
     --------
     >>> from labutils.core.synthetic import make_scene
     >>> from labutils.core.geometry import relative_pose, skew
+    >>> from labutils.twoview.epipolar import transform_points
     >>> s = make_scene(20, 2, noise_px=0.0, rng=np.random.default_rng(0))
     >>> x1, x2, _ = s.pair(0, 1, which="true")
     >>> Kinv = np.linalg.inv(s.K)
