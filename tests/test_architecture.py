@@ -35,8 +35,7 @@ LONG_ON_PURPOSE = {
     # a cycle), and 60 lines are the docstring's measured table of why the test is built as it is. Its helpers
     # that notebook 01 calls (design_matrix, transform_points, canonical_sign, sampson_distance) check their input
     # over the unchecked kernels the estimators and RANSAC call (issue 21: checks at the door, not in the loop).
-    # fundamental_ransac also asks core.ransac whether its F beats chance, and refuses no motion (issue 21).
-    "twoview/epipolar.py": 770,
+    "twoview/epipolar.py": 640,
 }
 
 

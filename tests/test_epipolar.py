@@ -15,9 +15,7 @@ from labutils.core.metrics import angle_between_deg, rotation_error_deg
 from labutils.core.synthetic import DEFAULT_K, make_scene
 from labutils.twoview.epipolar import (
     epipole_search,
-    fundamental_7point,
     fundamental_8point,
-    fundamental_ransac,
     gric_model_selection,
     hartley_normalisation,
     homography_dlt,
@@ -33,6 +31,7 @@ from labutils.twoview.essential import (
     pure_rotation,
 )
 from labutils.twoview.gold_standard import GoldStandardProblem, fundamental_gold_standard
+from labutils.twoview.seven_point import fundamental_7point, fundamental_ransac
 from labutils.twoview.triangulation import fundamental_residual, triangulate_optimal
 
 
@@ -539,3 +538,15 @@ def test_pure_rotation_and_the_parallax_test(rng):
     u = np.c_[x1, np.ones(60)] @ (s.K @ R0 @ np.linalg.inv(s.K)).T
     R1, d = pure_rotation(x1, u[:, :2] / u[:, 2:], s.K, s.K)
     assert rotation_error_deg(R1, R0) < 1e-9 and d.max() < 1e-9
+
+
+def test_fundamental_ransac_says_whether_it_reached_its_confidence():
+    """Issue 21: the result unpacks as (F, inliers) and carries the search's converged flag and chance bound; a
+    search cut off at max_iter says so instead of passing for a confident answer."""
+    s = make_scene(80, 2, noise_px=0.5, outlier_ratio=0.2, rng=np.random.default_rng(3))
+    x1, x2, _ = s.pair(0, 1)
+    r = fundamental_ransac(x1, x2, threshold_px=1.5, rng=np.random.default_rng(0))
+    F, inliers = r
+    assert r.converged and r.p_chance < 1e-6 and F is r.F and inliers is r.inliers and r.n_iter >= 1
+    cut = fundamental_ransac(x1, x2, threshold_px=1.5, rng=np.random.default_rng(0), max_iter=30)   # needs ~385
+    assert not cut.converged and cut.n_iter == 30 and cut.p_chance < 1e-6

@@ -66,7 +66,7 @@ EXERCISES = dict([
     _ex("normalisation_matrix", "01_fundamental_matrix", "labutils.twoview.epipolar:hartley_normalisation",
         "labutils.exercises.ex01_fundamental:_similarity"),
     _ex("eight_point", "01_fundamental_matrix", "labutils.twoview.epipolar:fundamental_8point",
-        "labutils.twoview.epipolar:fundamental_ransac", "labutils.twoview.epipolar:fundamental_7point",
+        "labutils.twoview.seven_point:fundamental_ransac", "labutils.twoview.seven_point:fundamental_7point",
         "labutils.twoview.epipolar:_eight_point_normalised", "labutils.twoview.epipolar:_enforce_rank2",
         "labutils.exercises.ex01_fundamental:_eight_point_T", "labutils.exercises.ex01_fundamental:_rank2",
         "cv2:findFundamentalMat"),

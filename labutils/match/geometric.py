@@ -6,8 +6,9 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import rotation_from_angle_axis, skew
 from ..core.validation import as_array, as_matrix, as_points
-from ..twoview.epipolar import fundamental_8point, fundamental_ransac, sampson_distance
+from ..twoview.epipolar import fundamental_8point, sampson_distance
 from ..twoview.essential import decompose_essential, essential_from_fundamental, fundamental_from_pose
+from ..twoview.seven_point import fundamental_ransac
 
 # ---------------------------------------------------------------------------------------------
 # The epipolar filter

@@ -6,8 +6,8 @@ from numpy.typing import ArrayLike
 from ..bundle.adjust import bundle_adjust
 from ..core.geometry import camera_center
 from ..core.validation import as_calibration, as_points, as_rng
-from ..twoview.epipolar import fundamental_ransac
 from ..twoview.essential import check_parallax, essential_from_fundamental, pose_from_essential
+from ..twoview.seven_point import fundamental_ransac
 from ..twoview.triangulation import ray_angles_deg, triangulate_tracks
 
 
