@@ -1,4 +1,4 @@
-"""The fundamental matrix from correspondences: linear estimates, the Sampson distance, and RANSAC.
+"""The fundamental matrix from correspondences: the 8-point, the Sampson distance, and GRIC for degenerate pairs.
 
 Conventions (see the package docstring): ``x2_hᵀ F x1_h = 0``; camera 1 is ``[I | 0]`` and camera 2
 ``[R | t]``; ``E = [t]× R``; ``F = K2⁻ᵀ E K1⁻¹``. F and E are defined up to scale (and sign): every F
