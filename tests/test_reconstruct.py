@@ -17,6 +17,7 @@ from labutils.reconstruct import (
     capture_check,
     focal_from_exif,
     focal_from_fundamentals,
+    reconstruct_photos,
     refine_shared_intrinsics,
     render_photo_folder,
     sharpness,
@@ -200,3 +201,25 @@ def test_an_output_that_is_an_input_is_refused_before_any_work(tmp_path):
     assert p.returncode == 2 and "--report and --out name the same file" in p.stderr
     p = _run(photos, "--out", tmp_path / "a.json", "--seed", "-1")
     assert p.returncode == 2 and "--seed: must be a non-negative integer" in p.stderr
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda s, vis: refine_shared_intrinsics(s.tracks + 0j, s.R, s.t, s.X, vis, s.K), "tracks must be real"),
+    (lambda s, vis: refine_shared_intrinsics(s.tracks, s.R, s.t, s.X, vis, s.K, f_prior=(800,)), "f_prior must be"),
+    (lambda s, vis: refine_shared_intrinsics(s.tracks, s.R, s.t, s.X, vis, s.K, max_points=True), "max_points"),
+    (lambda s, vis: focal_from_fundamentals(np.diag([1, 1, 0.0])[None], [1, 1], 100, n_grid=True), "n_grid"),
+    (lambda s, vis: focal_from_fundamentals(np.zeros((1, 3, 3)), [1, 1], 100), "all-zero"),
+    (lambda s, vis: focal_from_fundamentals(np.diag([1, 1, 0.0])[None], [1, 1], 100, span=(5, 0.2)), "span"),
+    (lambda s, vis: capture_check(["a", "b"], [np.zeros((8, 8), np.uint8)] * 2, [True, 3], {(0, 1): 30}),
+     r"n_features\[0\]"),
+    (lambda s, vis: capture_check(["a", "b"], [np.zeros((8, 8), np.uint8)] * 2, [5, 3], {(0, 1): -30}),
+     "pair_inliers"),
+    (lambda s, vis: sharpness(np.full((8, 8), np.nan)), "gray must be a finite"),
+    (lambda s, vis: reconstruct_photos(["a.jpg", "b.jpg"], rng=np.random.default_rng(0), dist=[0.1, 0.0]),
+     "dist goes with K"),
+    (lambda s, vis: reconstruct_photos(["a.jpg", "b.jpg"], rng=np.random.default_rng(0), max_size=0), "max_size"),
+])
+def test_bad_input_to_the_pieces_is_refused_by_name(call, message):
+    s = make_scene(40, 3, noise_px=0.5, rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match=message):
+        call(s, np.isfinite(s.tracks[..., 0]))

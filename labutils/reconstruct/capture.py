@@ -13,6 +13,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..core.validation import as_array, as_count
+
 __all__ = ["CaptureReport", "capture_check", "sharpness"]
 
 RELATIVE = 1 / 3          # below a third of the set's median: flagged
@@ -25,9 +27,9 @@ def sharpness(gray: np.ndarray) -> float:
     >>> sharpness(img) > sharpness(cv2.GaussianBlur(img, (0, 0), 3))
     True
     """
-    g = np.asarray(gray)
-    if g.ndim != 2 or g.size == 0:
-        raise ValueError(f"gray must be a non-empty (H, W) image; got shape {g.shape}")
+    g = as_array(gray, "gray", "(H, W)")
+    if g.ndim != 2 or g.size == 0 or not np.all(np.isfinite(g)):
+        raise ValueError(f"gray must be a finite, non-empty (H, W) image; got shape {g.shape}")
     return float(cv2.Laplacian(g.astype(np.float32), cv2.CV_32F).var())
 
 
@@ -131,11 +133,13 @@ def capture_check(names, grays, n_features, pair_inliers, *, min_inliers=20):
         raise ValueError(f"names, grays and n_features must have one entry per view; got {V}, {len(grays)}, "
                          f"{len(n_features)}")
     sharp = np.array([sharpness(g) for g in grays])
-    nf = np.asarray(n_features, int)
+    nf = np.array([as_count(n, f"n_features[{v}]", 0) for v, n in enumerate(n_features)], int)
+    min_inliers = as_count(min_inliers, "min_inliers")
     ii, jj = [], []
     for (i, j), n in pair_inliers.items():
         if not (0 <= i < V and 0 <= j < V) or i == j:
             raise ValueError(f"pair_inliers has a pair {(i, j)} outside 0..{V - 1}")
+        as_count(n, f"pair_inliers[{(i, j)}]", 0)
         if n >= min_inliers:
             ii.append(i)
             jj.append(j)

@@ -21,7 +21,7 @@ from scipy.optimize import least_squares, minimize_scalar
 from scipy.spatial.transform import Rotation
 
 from ..core.geometry import left_jacobian_so3, skew
-from ..core.validation import as_calibration, as_positive, as_rotations
+from ..core.validation import as_array, as_calibration, as_count, as_positive, as_rotations, as_tracks
 
 __all__ = ["SharedIntrinsics", "focal_from_fundamentals", "refine_shared_intrinsics"]
 
@@ -34,8 +34,8 @@ def _asymmetry(F, f, c):
     return (s[:, 0] - s[:, 1]) / (s[:, 0] + s[:, 1])
 
 
-def focal_from_fundamentals(Fs: ArrayLike, principal_point: ArrayLike, size: float, *, weights: ArrayLike = None,
-                            span: tuple = (0.25, 5.0), n_grid: int = 120) -> tuple:
+def focal_from_fundamentals(Fs: ArrayLike, principal_point: ArrayLike, size: float, *, span: tuple = (0.25, 5.0),
+                            n_grid: int = 120) -> tuple:
     """Self-calibrated focal length from the fundamental matrices of many pairs (module docstring).
 
     Parameters
@@ -46,8 +46,6 @@ def focal_from_fundamentals(Fs: ArrayLike, principal_point: ArrayLike, size: flo
         In pixels (the image centre).
     size : float
         The image's longer side in pixels: the search runs over ``f`` in ``span`` times it.
-    weights : (P,) array_like, optional
-        Ignored pairs get 0; by default all count equally (the median is unweighted).
     span : (float, float)
     n_grid : int
 
@@ -71,17 +69,21 @@ def focal_from_fundamentals(Fs: ArrayLike, principal_point: ArrayLike, size: flo
     >>> bool(abs(f / s.K[0, 0] - 1) < 1e-6)
     True
     """
-    F = np.asarray(Fs, float)
+    F = as_array(Fs, "Fs", "(P, 3, 3)")
     if F.ndim != 3 or F.shape[1:] != (3, 3) or len(F) == 0:
         raise ValueError(f"Fs must have shape (P, 3, 3) with P >= 1; got shape {F.shape}")
-    if not np.all(np.isfinite(F)):
-        raise ValueError("Fs has NaN or inf entries")
-    c = np.asarray(principal_point, float)
+    if not np.all(np.isfinite(F)) or np.any(np.linalg.norm(F, axis=(1, 2)) == 0):
+        raise ValueError("Fs has NaN, inf or all-zero matrices")
+    c = as_array(principal_point, "principal_point", "(2,)")
     if c.shape != (2,) or not np.all(np.isfinite(c)):
         raise ValueError(f"principal_point must be 2 finite numbers; got {principal_point!r}")
     size = as_positive(size, "size")
+    lo, hi = (as_positive(v, "span") for v in span) if len(span) == 2 else (None, None)
+    if lo is None or not lo < hi:
+        raise ValueError(f"span must be two factors (low, high) with low < high; got {span!r}")
+    n_grid = as_count(n_grid, "n_grid", 3)
     F = F / np.linalg.norm(F, axis=(1, 2))[:, None, None]
-    grid = np.geomspace(span[0] * size, span[1] * size, n_grid)
+    grid = np.geomspace(lo * size, hi * size, n_grid)
     cost = np.array([np.median(_asymmetry(F, f, c)) for f in grid])
     k = int(np.argmin(cost))
     lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, n_grid - 1)]
@@ -234,11 +236,9 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         Bad shapes, a K0 that is not a calibration or has skew or unequal focal lengths, rotations that are not,
         fewer than two views or 10 observations.
     """
-    x = np.asarray(tracks, float)
-    if x.ndim != 3 or x.shape[2] != 2:
-        raise ValueError(f"tracks must have shape (V, T, 2); got shape {x.shape}")
+    x = as_tracks(tracks)
     V, T = x.shape[:2]
-    R, t, X = np.asarray(R, float), np.asarray(t, float), np.asarray(X, float)
+    R, t, X = as_array(R, "R", "(V, 3, 3)"), as_array(t, "t", "(V, 3)"), as_array(X, "X", "(T, 3)")
     if R.shape != (V, 3, 3) or t.shape != (V, 3) or X.shape != (T, 3):
         raise ValueError(f"R, t, X must have shapes ({V}, 3, 3), ({V}, 3), ({T}, 3); got {R.shape}, {t.shape}, "
                          f"{X.shape}")
@@ -250,6 +250,8 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         raise ValueError("K0 must have square pixels and no skew (one focal length to refine)")
     views = np.flatnonzero(np.isfinite(R).all(axis=(1, 2)) & np.isfinite(t).all(axis=1) & inl.any(axis=1))
     pts = np.flatnonzero(np.isfinite(X).all(axis=1) & inl.any(axis=0))
+    if max_points is not None:
+        max_points = as_count(max_points, "max_points", 3)
     if max_points is not None and len(pts) > max_points:      # the best-observed points: five intrinsics need few
         seen = inl[np.ix_(views, pts)].sum(axis=0)
         pts = np.sort(pts[np.argsort(-seen, kind="stable")[:max_points]])
@@ -262,8 +264,13 @@ def refine_shared_intrinsics(tracks: ArrayLike, R: ArrayLike, t: ArrayLike, X: A
         raise ValueError(f"{len(ci)} observations; at least 10 are needed")
     obs = x[views[ci], pts[pj]]
     f0 = float(K0[0, 0])
+    if f_prior is not None and (isinstance(f_prior, str) or np.ndim(f_prior) != 1 or len(f_prior) != 2):
+        raise ValueError(f"f_prior must be (f_centre, sigma_log); got {f_prior!r}")
     f_centre, f_sigma = (f0, 0.5) if f_prior is None else (as_positive(f_prior[0], "f_prior[0]"),
                                                           as_positive(f_prior[1], "f_prior[1]"))
+    max_nfev = as_count(max_nfev, "max_nfev")
+    if not isinstance(refine_distortion, bool | np.bool_):
+        raise ValueError(f"refine_distortion must be True or False; got {refine_distortion!r}")
     k_sigma = as_positive(k_sigma, "k_sigma")
     c_centre = K0[:2, 2].copy()
     c_sigma = 0.0 if c_sigma is None else as_positive(c_sigma, "c_sigma", allow_zero=True)

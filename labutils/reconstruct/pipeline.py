@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..calibrate.lens import undistort_points
-from ..core.validation import as_calibration, as_rng
+from ..core.validation import as_array, as_calibration, as_count, as_rng
 from ..match.descriptors import detect_features
 from ..match.images import IMAGE_SUFFIXES, read_gray, scale_calibration
 from ..match.pairs import select_pairs
@@ -138,6 +138,14 @@ def reconstruct_photos(paths, *, rng, K=None, dist=None, max_size=1200, min_inli
         Bad input (an unreadable image, a K that is not a calibration, photos of different sizes).
     """
     rng = as_rng(rng)
+    max_size = as_count(max_size, "max_size", 16)
+    min_inliers = as_count(min_inliers, "min_inliers", 8)
+    if dist is not None:
+        dist = as_array(dist, "dist", "(2,) to (5,)")
+        if dist.ndim != 1 or not 2 <= dist.size <= 5 or not np.all(np.isfinite(dist)):
+            raise ValueError(f"dist must be 2 to 5 finite numbers (k1, k2[, p1, p2, k3]); got shape {dist.shape}")
+        if K is None:
+            raise ValueError("dist goes with K: a lens without its calibration is not used")
     paths = [Path(p) for p in paths]
     names = [p.name for p in paths]
     V = len(paths)
@@ -175,7 +183,7 @@ def reconstruct_photos(paths, *, rng, K=None, dist=None, max_size=1200, min_inli
     if K is not None:
         K = as_calibration(K, "K")
         Kw = scale_calibration(K, s)
-        d = np.zeros(2) if dist is None else np.asarray(dist, float)[:2]
+        d = np.zeros(2) if dist is None else dist[:2]
         focal = {"value": float(K[0, 0]), "sd": 0.0, "source": "given", "start": float(K[0, 0])}
         log(f"camera: given, f = {K[0, 0]:.1f} px, k1 = {d[0]:.4f}, k2 = {d[1]:.4f}")
     else:
@@ -236,20 +244,17 @@ def reconstruct_photos(paths, *, rng, K=None, dist=None, max_size=1200, min_inli
 
 
 def _colours(paths, x, vis, max_size):
-    """Per-channel median of each point's observed pixel colours (working images)."""
+    """Per-channel median of each point's observed pixel colours (working images: ``read_gray``'s size)."""
     samples = np.full((len(paths), x.shape[1], 3), np.nan)
     for v, p in enumerate(paths):
         if not vis[v].any():
             continue
-        bgr = cv2.imread(str(p), cv2.IMREAD_COLOR)
-        gray, s, _ = read_gray(p, max_size)
-        img = cv2.resize(bgr, (gray.shape[1], gray.shape[0]), interpolation=cv2.INTER_AREA)[:, :, ::-1]
+        gray, _, _ = read_gray(p, max_size)
+        img = cv2.resize(cv2.imread(str(p), cv2.IMREAD_COLOR), (gray.shape[1], gray.shape[0]),
+                         interpolation=cv2.INTER_AREA)[:, :, ::-1]
         xy = np.clip(np.round(x[v, vis[v]]).astype(int), 0, [img.shape[1] - 1, img.shape[0] - 1])
         samples[v, vis[v]] = img[xy[:, 1], xy[:, 0]]
-    with np.errstate(all="ignore"):
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            col = np.nanmedian(samples, axis=0)
-    return np.nan_to_num(col, nan=128.0).round().astype(np.uint8)
+    seen = np.isfinite(samples[..., 0]).any(axis=0)
+    col = np.full((x.shape[1], 3), 128.0)
+    col[seen] = np.nanmedian(samples[:, seen], axis=0)
+    return col.round().astype(np.uint8)
