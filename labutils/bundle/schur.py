@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 
 from ..core.lm import minimise
 from ..core.robust import CURVATURE_FLOOR, SECOND_ORDER_AFTER, rho
-from ..core.validation import as_count, as_positive
+from ..core.validation import as_array, as_count, as_positive
 from .reprojection import check_problem, project_observations, reprojection_residuals
 
 
@@ -389,13 +389,6 @@ def _reduced_camera_blocks(st, Y, W):
     return diag, B[st.off]
 
 
-def _block_diag_dense(blocks):
-    V, k, _ = blocks.shape
-    out = np.zeros((V, k, V, k))
-    out[np.arange(V), :, np.arange(V), :] = blocks
-    return out.reshape(V * k, V * k)
-
-
 def schur_step_dense(J: ArrayLike, r: ArrayLike, n_cam_cols: int, mu: float) -> tuple:
     """One damped Gauss–Newton step ``(JᵀJ + μ diag(JᵀJ)) δ = -Jᵀr`` by the Schur complement, on a dense ``J``.
 
@@ -429,11 +422,13 @@ def schur_step_dense(J: ArrayLike, r: ArrayLike, n_cam_cols: int, mu: float) -> 
     >>> bool(np.allclose(np.r_[dc, dp], delta))
     True
     """
-    J = np.asarray(J.toarray() if sp.issparse(J) else J, dtype=float)
-    r = np.asarray(r, dtype=float)
-    if J.ndim != 2 or r.shape != (J.shape[0],):
+    J = as_array(J.toarray() if sp.issparse(J) else J, "J", "(N, n)")
+    r = as_array(r, "r", "(N,)")
+    if J.ndim != 2 or J.size == 0 or r.shape != (J.shape[0],):
         raise ValueError(f"J must be (N, n) and r (N,); got J {J.shape} and r {r.shape}")
-    c = int(n_cam_cols)
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        raise ValueError("J and r must be finite (a NaN or inf entry)")
+    c = as_count(n_cam_cols, "n_cam_cols", 0)
     if not 0 <= c <= J.shape[1] or (J.shape[1] - c) % 3:
         raise ValueError(f"n_cam_cols must leave a multiple of 3 point columns of J's {J.shape[1]}; got {n_cam_cols}")
     mu = as_positive(mu, "mu")

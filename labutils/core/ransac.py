@@ -189,6 +189,7 @@ def ransac(n_data: int, sample_size: int, fit: Callable, errors: Callable, thres
     p_chance = np.nan
     if chance is not None:
         p = chance(best) if callable(chance) else chance
+        p = as_fraction(p, "chance (the probability that an unrelated item is an inlier)", closed=True)
         p_chance = chance_probability(k, n_data, sample_size, p, n_models)
     res = RansacResult(best, best_inliers, it, n_models=n_models, n_needed=int(min(needed, np.iinfo(np.int64).max)),
                        converged=bool(it >= needed), p_chance=p_chance)

@@ -175,7 +175,8 @@ def _is_int(tok):
         return False
 
 
-MAX_ABS = 1e12      # no BAL value (pixel, rotation, translation, focal length, distortion, coordinate) is larger
+MAX_ABS = 1e12      # no real BAL value (pixel, rotation, translation, focal length, distortion, coordinate) is near
+# it; a larger one is a corrupt file (1e300 made the cost inf and the "solution" the unchanged input), refused by line
 
 
 def _to_float(tokens, where, line_of, what):

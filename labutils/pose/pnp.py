@@ -508,8 +508,9 @@ def pnp_ransac(X: ArrayLike, x: ArrayLike, K: ArrayLike, *, rng: np.random.Gener
     def errors(model):
         return _reprojection_errors(X, x, K, *model)
 
+    chance = min(1.0, np.pi * threshold_px**2 / max(spread.prod(), 1e-9))     # the disc's share of the pixels' box
     (R, t), inliers, n_iter = rr = ransac(len(X), 3, fit, errors, threshold_px, rng=rng, confidence=confidence,
-                                          max_iter=max_iter, chance=np.pi * threshold_px**2 / max(spread.prod(), 1e-9))
+                                          max_iter=max_iter, chance=chance)
     ransac_inliers = inliers.copy()
     if inliers.sum() < 4:
         raise ValueError(f"no pose explains more than the 3 sampled points ({n_iter} samples): "

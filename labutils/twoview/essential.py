@@ -7,7 +7,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
-from ..core.validation import as_calibration, as_essential, as_fundamental, as_matrix, as_points, as_rotation
+from ..core.validation import (
+    as_calibration,
+    as_essential,
+    as_fundamental,
+    as_matrix,
+    as_points,
+    as_rotation,
+    as_vector3,
+)
 from .epipolar import _canonical_sign, _transform_points, check_pair, sampson_distance
 from .triangulation import triangulate
 
@@ -157,10 +165,14 @@ def cheirality_choice(poses: list, y1: ArrayLike, y2: ArrayLike) -> tuple:
     """
     y1 = as_points(y1, "y1", min_n=5)              # a vote needs voters: five, the minimum that fixes E
     y2 = as_points(y2, "y2", like=y1)
-    poses = list(poses)
-    if not poses:
-        raise ValueError("poses must hold at least one (R, t) candidate, got none")
-    return poses[int(np.argmax(_cheirality_counts(poses, y1, y2)))]
+    if isinstance(poses, np.ndarray | str) or not hasattr(poses, "__len__") or not len(poses):
+        raise ValueError(f"poses must be a list of (R, t) candidates, at least one; got {type(poses).__name__}")
+    for k, pose in enumerate(poses):
+        if not isinstance(pose, tuple | list) or len(pose) != 2:
+            raise ValueError(f"poses[{k}] must be a pair (R, t)")
+        as_rotation(pose[0], f"poses[{k}] R")
+        as_vector3(pose[1], f"poses[{k}] t")
+    return poses[int(np.argmax(_cheirality_counts(list(poses), y1, y2)))]
 
 
 def cheirality_counts(E: ArrayLike, x1: ArrayLike, x2: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> list:

@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 
 from ..core.geometry import skew
 from ..core.lm import minimise
-from ..core.validation import as_count, as_fundamental, as_matrix, as_points, as_positive
+from ..core.validation import as_camera_matrix, as_count, as_fundamental, as_points, as_positive
 from .epipolar import (
     _canonical_sign,
     _transform_points,
@@ -50,18 +50,22 @@ def gold_standard_residuals(P2: ArrayLike, points: ArrayLike, x1: ArrayLike, x2:
     >>> gold_standard_residuals(P2, np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 2)), np.zeros((1, 2)))
     array([0., 0., 1., 0.])
     """
-    P2 = as_matrix(P2, "P2", (3, 4))
-    if np.linalg.matrix_rank(P2) < 3:
-        raise ValueError("P2 must have rank 3 (a camera [M | e']); it has lower rank")
+    P2 = as_camera_matrix(P2, "P2")
     points = as_points(points, "points", dim=3)
     x1 = as_points(x1, "x1")
     if len(x1) != len(points):
         raise ValueError(f"x1 has {len(x1)} rows for the {len(points)} rows of points: one per correspondence")
     x2 = as_points(x2, "x2", like=x1)
     X = np.column_stack([points[:, 0], points[:, 1], np.ones(len(points)), points[:, 2]])
-    y = X @ P2.T
-    if np.any(np.abs(y[:, 2]) < 1e-12 * np.abs(y).max(axis=1)):
+    if np.any(np.abs((X @ P2.T)[:, 2]) < 1e-12 * np.abs(X @ P2.T).max(axis=1)):
         raise ValueError("points has a point that P2 maps to infinity in view 2 (third coordinate 0)")
+    return _gold_standard_residuals(P2, points, x1, x2)
+
+
+def _gold_standard_residuals(P2, points, x1, x2):
+    """:func:`gold_standard_residuals` without the checks: the cost inside the LM loop."""
+    X = np.column_stack([points[:, 0], points[:, 1], np.ones(len(points)), points[:, 2]])
+    y = X @ P2.T
     return np.hstack([points[:, :2] - x1, y[:, :2] / y[:, 2:] - x2]).ravel()
 
 
@@ -96,7 +100,7 @@ class GoldStandardProblem:
         if residuals is not None and not callable(residuals):
             raise ValueError("residuals must be a function (P2, points, y1, y2) -> (4N,), "
                              f"got {type(residuals).__name__}")
-        self._residuals = gold_standard_residuals if residuals is None else residuals
+        self._residuals = _gold_standard_residuals if residuals is None else residuals
         self.x1, self.x2, self.n = x1, x2, len(x1)
         self.T1, self.T2 = hartley_normalisation(x1), hartley_normalisation(x2)
         self.s1, self.s2 = self.T1[0, 0], self.T2[0, 0]
@@ -113,6 +117,11 @@ class GoldStandardProblem:
         a, b = np.cross(z2, P2[:, 3]), np.cross(z2, Mu)
         rho = -np.einsum("ni,ni->n", a, b) / np.maximum(np.einsum("ni,ni->n", a, a), 1e-300)
         self.p0 = np.concatenate([P2.ravel(), np.column_stack([u, rho]).ravel()])
+        if residuals is not None:                  # a student's cost: its shape checked once, here, not in the loop
+            r = np.asarray(residuals(P2, self.unpack(self.p0)[1], self.y1, self.y2))
+            if r.shape != (4 * self.n,) or r.dtype.kind not in "fi":
+                raise ValueError(f"residuals must return {4 * self.n} real numbers (shape ({4 * self.n},)), 4 per "
+                                 f"point; it returned {r.dtype} shape {r.shape}")
 
     @property
     def n_params(self):
@@ -131,8 +140,6 @@ class GoldStandardProblem:
         """``(4N,)`` residuals in pixels: per point ``(x1_hat - x1, x2_hat - x2)``."""
         P2, q = self.unpack(p)
         r = np.asarray(self._residuals(P2, q, self.y1, self.y2), float)
-        if r.shape != (4 * self.n,):
-            raise ValueError(f"residuals must return shape ({4 * self.n},), 4 per point; it returned {r.shape}")
         r = r.reshape(self.n, 4) / [self.s1, self.s1, self.s2, self.s2]     # back to pixels
         return r.ravel()
 
