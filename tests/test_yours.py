@@ -49,18 +49,47 @@ def test_a_stub_or_a_missing_notebook_gives_the_library_with_the_reason(tmp_path
     assert np.allclose(f(x1, x2), fundamental_8point(x1, x2))
 
 
-def test_an_unwritten_helper_is_named_and_the_library_answers(tmp_path, monkeypatch, capsys):
+def test_a_loaded_function_keeps_working_when_a_helper_of_its_notebook_is_a_stub(tmp_path, monkeypatch, capsys):
+    """In a loaded notebook the stub helper is replaced by the library's stand-in: the student's function stays
+    theirs (here it returns the helper's T, which is now hartley_normalisation's)."""
+    from labutils.twoview import hartley_normalisation
+
     _notebook(tmp_path, "01_fundamental_matrix", [
         ("def normalisation_matrix(x):\n    raise NotImplementedError\n", True),
         ("def eight_point(x1, x2):\n    T = normalisation_matrix(x1)\n    return T\n", True)])
     monkeypatch.setenv("LABUTILS_YOURS_DIR", str(tmp_path))
     f = yours.load("eight_point")
-    assert f.is_yours
     x1, x2 = _pair()
-    F = f(x1, x2)
-    assert np.allclose(F, fundamental_8point(x1, x2))
+    assert f.is_yours and np.allclose(f(x1, x2), hartley_normalisation(x1))
+
+
+def test_an_unwritten_helper_in_the_kernel_is_named_and_the_library_answers(capsys):
+    ns = {}
+    exec("def normalisation_matrix(x):\n    raise NotImplementedError\n"
+         "def eight_point(x1, x2):\n    return normalisation_matrix(x1)\n", ns)
+    f = yours.Yours(ns["eight_point"], yours.EXERCISES["eight_point"])
+    x1, x2 = _pair()
+    assert np.allclose(f(x1, x2), fundamental_8point(x1, x2))
     assert "your eight_point calls normalisation_matrix, which is not written yet" in capsys.readouterr().out
 
+
+def test_a_name_from_outside_the_solution_cells_falls_back_and_says_so(tmp_path, monkeypatch, capsys):
+    _notebook(tmp_path, "01_fundamental_matrix", [
+        ("SCALE = 2.0\n", False),
+        ("def sampson(F, x1, x2):\n    return SCALE * x1[:, 0]\n", True)])
+    monkeypatch.setenv("LABUTILS_YOURS_DIR", str(tmp_path))
+    f = yours.load("sampson")
+    x1, x2 = _pair()
+    F = fundamental_8point(x1, x2)
+    from labutils.twoview import sampson_distance
+
+    assert np.allclose(f(F, x1, x2), sampson_distance(F, x1, x2))
+    assert "uses a name from outside its cells" in capsys.readouterr().out
+
+
+def test_a_stand_in_is_named_for_its_exercise():
+    s = yours._library(yours.EXERCISES["sampson"], "not written yet", True)
+    assert s.__name__ == "sampson" and not s.is_yours and s.why == "not written yet"
 
 def test_assert_own_fails_for_a_hand_in_that_calls_the_library_and_passes_for_ones_own():
     ns = {"fundamental_8point": fundamental_8point, "np": np}
@@ -100,3 +129,21 @@ def test_choose_pose_and_the_gold_standard_cost_have_fallbacks_with_the_students
                          ("gold_standard_residuals", ["P2", "points", "x1", "x2"])]:
         fallback = yours._resolve(yours.EXERCISES[name].fallback)
         assert list(inspect.signature(fallback).parameters) == params, (name, fallback)
+
+
+
+def test_the_private_kernels_behind_the_library_earn_nothing_either():
+    """A hand-in that calls the unchecked kernel inside the library's function (``_sampson`` behind
+    ``sampson_distance``, ``_triangulate_multiview`` behind ``triangulate``) is caught like one calling the function."""
+    from labutils.twoview.epipolar import _sampson
+    from labutils.twoview.triangulation import _triangulate_multiview
+
+    ns = {"_sampson": _sampson, "_tm": _triangulate_multiview, "np": np}
+    exec("def sampson(F, x1, x2):\n    return _sampson(F, x1, x2)\n"
+         "def triangulate_linear(P1, P2, x1, x2):\n    return _tm(np.stack([P1, P2]), np.stack([x1, x2]))\n", ns)
+    s = make_scene(20, 2, noise_px=0.0, rng=np.random.default_rng(0))
+    x1, x2, _ = s.pair(0, 1)
+    with pytest.raises(AssertionError, match="_sampson"):
+        yours.assert_own(ns["sampson"], fundamental_8point(x1, x2), x1, x2)
+    with pytest.raises(AssertionError, match="_triangulate_multiview"):
+        yours.assert_own(ns["triangulate_linear"], s.P[0], s.P[1], x1, x2)

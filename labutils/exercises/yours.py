@@ -32,6 +32,7 @@ import inspect
 import json
 import os
 import sys
+import textwrap
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,7 +72,8 @@ EXERCISES = dict([
         "labutils.exercises.ex01_fundamental:_eight_point_T", "labutils.exercises.ex01_fundamental:_rank2",
         "cv2:findFundamentalMat"),
     _ex("sampson", "01_fundamental_matrix", "labutils.twoview.epipolar:sampson_distance",
-        "labutils.twoview.epipolar:_sampson_and_gradient", "labutils.exercises.ex01_fundamental:_sampson_parts",
+        "labutils.twoview.epipolar:_sampson", "labutils.twoview.epipolar:_sampson_and_gradient",
+        "labutils.exercises.ex01_fundamental:_sampson_parts",
         "labutils.exercises.ex01_fundamental:_sampson_variants"),
     _ex("gold_standard_residuals", "01_fundamental_matrix", "labutils.twoview.gold_standard:gold_standard_residuals",
         "labutils.exercises.ex01_fundamental:_gs_variants"),
@@ -82,12 +84,14 @@ EXERCISES = dict([
         "labutils.twoview.essential:_cheirality_counts", "labutils.twoview.essential:pose_from_essential",
         "labutils.exercises.ex02_essential:_depths", "cv2:recoverPose"),
     _ex("triangulate_linear", "02_essential_and_pose", "labutils.twoview.triangulation:triangulate",
-        "labutils.twoview.triangulation:triangulate_multiview", "labutils.exercises.ex02_essential:_dlt",
+        "labutils.twoview.triangulation:triangulate_multiview", "labutils.twoview.triangulation:_triangulate_multiview",
+        "labutils.exercises.ex02_essential:_dlt",
         "cv2:triangulatePoints"),
     _ex("adaptive_ransac", "03_pnp", "labutils.core.ransac:ransac", "labutils.pose.pnp:pnp_ransac",
         "cv2:solvePnPRansac"),
     _ex("projection_jacobian", "04_bundle_adjustment", "labutils.bundle.reprojection:reprojection_blocks",
-        "labutils.bundle.reprojection:reprojection_jacobian", "labutils.bundle.reprojection:project_observations"),
+        "labutils.bundle.reprojection:reprojection_jacobian", "labutils.bundle.reprojection:project_observations",
+        "labutils.pose.pnp:pose_jacobian", "labutils.pose.pnp:_pose_jacobian"),
     _ex("sparsity_mask", "04_bundle_adjustment", "labutils.bundle.reprojection:jacobian_sparsity",
         "labutils.bundle.reprojection:jacobian_structure"),
     _ex("schur_step", "04_bundle_adjustment", "labutils.bundle.schur:schur_step_dense",
@@ -102,7 +106,7 @@ EXERCISES = dict([
     _ex("incremental_loop", "05_incremental_sfm", "labutils.exercises.ex05_sfm:incremental_loop_reference",
         "labutils.sfm.incremental:incremental_sfm", "labutils.sfm.global_sfm:global_sfm"),
     _ex("pose_from_depths", "03_pnp", "labutils.exercises.ex03_pnp:pose_from_depths_reference",
-        "labutils.pose.pnp:p3p", "labutils.pose.pnp:p3p_bearings"),
+        "labutils.pose.pnp:p3p", "labutils.pose.pnp:p3p_bearings", "labutils.exercises.ex03_pnp:_build_R"),
 ])
 
 
@@ -130,7 +134,7 @@ def _exercise(name):
 def _is_stub(fn):
     """True when the body of ``fn`` (its source) only raises NotImplementedError, after an optional docstring."""
     try:
-        tree = ast.parse(_dedent(inspect.getsource(fn)))
+        tree = ast.parse(textwrap.dedent(inspect.getsource(fn)))
     except (OSError, TypeError, SyntaxError):
         return False
     return bool(tree.body) and _is_stub_node(tree.body[0])
@@ -145,12 +149,6 @@ def _is_stub_node(node):
         return False
     exc = body[0].exc.func if isinstance(body[0].exc, ast.Call) else body[0].exc
     return isinstance(exc, ast.Name) and exc.id == "NotImplementedError"
-
-
-def _dedent(source):
-    lines = source.splitlines()
-    indent = min((len(s) - len(s.lstrip()) for s in lines if s.strip()), default=0)
-    return "\n".join(s[indent:] for s in lines)
 
 
 def _unwritten_in(tb):
@@ -174,11 +172,14 @@ class Yours:
     def __call__(self, *args, **kwargs):
         try:
             return self.fn(*args, **kwargs)
-        except NotImplementedError as err:
-            helper = _unwritten_in(err.__traceback__)
+        except (NotImplementedError, NameError) as err:
+            # NotImplementedError: a helper of the student's still a stub; NameError: a name the function uses that
+            # lives outside the notebook's solution cells (only those are loaded by load()); both are said, once
+            what = (f"calls {_unwritten_in(err.__traceback__)}, which is not written yet"
+                    if isinstance(err, NotImplementedError) else f"uses a name from outside its cells ({err})")
             if not self._warned and not self.quiet:
-                print(f"your {self.exercise.name} calls {helper}, which is not written yet: "
-                      f"the library's {_label(self.exercise.fallback)} answers instead")
+                print(f"your {self.exercise.name} {what}: the library's {_label(self.exercise.fallback)} answers "
+                      "instead")
             self._warned = True
             return _resolve(self.exercise.fallback)(*args, **kwargs)
 
@@ -190,9 +191,14 @@ def _library(exercise, why, quiet):
     fallback = _resolve(exercise.fallback)
     if not quiet:
         print(f"{exercise.name}: {why}: the library's {_label(exercise.fallback)} stands in")
-    fallback = functools.wraps(fallback)(functools.partial(fallback))
-    fallback.is_yours, fallback.why = False, why
-    return fallback
+
+    def stand_in(*args, **kwargs):
+        return fallback(*args, **kwargs)
+
+    stand_in.__name__ = stand_in.__qualname__ = exercise.name      # named for the exercise (assert_own, summary)
+    stand_in.__doc__ = fallback.__doc__
+    stand_in.is_yours, stand_in.why = False, why
+    return stand_in
 
 
 def pick(fn, name=None, *, quiet=False):
@@ -269,6 +275,8 @@ def _namespace(path, mtime):
             pass
     exec(compile(ast.Module(body=defs, type_ignores=[]), str(path), "exec"), ns)
     ns["__stubs__"] = {node.name for node in defs if isinstance(node, ast.FunctionDef) and _is_stub_node(node)}
+    for name in ns["__stubs__"] & set(EXERCISES):   # a stub helper: the library's stands in, so that the student's
+        ns[name] = _library(EXERCISES[name], "not written yet", True)      # function that calls it stays theirs
     return ns
 
 
